@@ -1,0 +1,1 @@
+//! ROS `camera_info` YAML loading. Filled in by the camera-config work.

@@ -1,0 +1,79 @@
+//! Error types of the geometry library, one enum per domain.
+
+use std::path::PathBuf;
+
+/// A configuration file (camera_info YAML, extrinsics YAML) could not be used.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    /// The file could not be read.
+    #[error("cannot read {path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The underlying I/O error.
+        source: std::io::Error,
+    },
+    /// The text is not valid YAML or does not have the expected structure.
+    #[error("{what} is not valid YAML of the expected form: {message}. {hint}")]
+    Yaml {
+        /// What was being parsed (file path or description).
+        what: String,
+        /// The parser's message (includes line and column).
+        message: String,
+        /// What the file should look like.
+        hint: &'static str,
+    },
+    /// A field has a wrong value, size or is inconsistent with another field.
+    #[error("{what}: field `{field}` {problem}; expected {expected}")]
+    Field {
+        /// What was being parsed (file path or description).
+        what: String,
+        /// The offending field, e.g. `camera_matrix.data`.
+        field: &'static str,
+        /// What is wrong with it.
+        problem: String,
+        /// The expected form.
+        expected: &'static str,
+    },
+}
+
+/// A geometric computation could not produce a result.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum GeometryError {
+    /// A point lies behind (or on) the camera's image plane.
+    #[error("point is behind the camera (z = {z_m} m); it has no image")]
+    BehindCamera {
+        /// The point's depth in the camera frame.
+        z_m: f64,
+    },
+    /// An input contained NaN or infinity.
+    #[error("input `{what}` is not finite")]
+    NonFinite {
+        /// Which input.
+        what: &'static str,
+    },
+    /// Iterative undistortion did not converge (pixel far outside the lens' valid field).
+    #[error("undistortion did not converge for pixel ({u_px}, {v_px}); residual {residual}")]
+    UndistortDiverged {
+        /// Pixel column.
+        u_px: f64,
+        /// Pixel row.
+        v_px: f64,
+        /// Final residual in normalised units.
+        residual: f64,
+    },
+    /// Too few usable correspondences for the solver.
+    #[error("need at least {needed} usable points, got {got}")]
+    TooFewPoints {
+        /// Minimum required.
+        needed: usize,
+        /// Number available.
+        got: usize,
+    },
+    /// The solver did not converge or the problem is degenerate.
+    #[error("solver failed: {reason}")]
+    SolverFailed {
+        /// Why.
+        reason: &'static str,
+    },
+}

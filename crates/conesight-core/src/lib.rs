@@ -1,0 +1,22 @@
+//! # conesight-core
+//!
+//! The geometry at the heart of conesight: everything that turns seven image keypoints into a
+//! cone's 3D position. Synchronous, no I/O beyond parsing configuration text.
+//!
+//! Modules:
+//! - [`camera`]: pinhole + OpenCV `plumb_bob` distortion ([`camera::Camera`]), ROS
+//!   `camera_info` YAML, extrinsics (`vehicle_from_camera`) and the paper's default camera.
+//! - [`cone`]: the Formula Student cone models, the 7 keypoints, the cross-ratio and the exact
+//!   silhouette keypoints of a cone seen from a camera.
+//! - [`pnp`]: the cone-specific PnP solver with covariance, and a generic PnP
+//!   (EPnP + Levenberg-Marquardt + RANSAC) used as a fallback and cross-check.
+//!
+//! Frames: the camera frame is OpenCV's (x right, y down, z forward); the vehicle frame is
+//! ROS REP-103 (x forward, y left, z up). Transforms are named `target_from_source`.
+//! Units: metres, radians, pixels (`_px`).
+
+pub mod camera;
+pub mod error;
+
+pub use camera::{Camera, Distortion, Extrinsics};
+pub use error::{ConfigError, GeometryError};
