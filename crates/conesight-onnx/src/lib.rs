@@ -1,0 +1,19 @@
+//! # conesight-onnx
+//!
+//! Finds the ONNX Runtime shared library, loads it once through `ort` (feature `load-dynamic`)
+//! and runs ONNX models on `f32` tensors, with errors that say which file is missing and which
+//! command installs it.
+//!
+//! Modules:
+//! - [`runtime`]: [`runtime::locate_library`] (search order) and [`runtime::environment`] (load once).
+//! - [`model`]: [`model::OnnxModel`], a session with named `f32` inputs and outputs.
+//!
+//! Entry point: `OnnxModel::load(path, &ModelOptions::default())`.
+
+pub mod error;
+pub mod model;
+pub mod runtime;
+
+pub use error::OnnxError;
+pub use model::{ModelOptions, OnnxModel, TensorF32};
+pub use runtime::{ORT_LIBRARY_FILE, environment, locate_library};

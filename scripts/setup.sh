@@ -1,0 +1,64 @@
+#!/usr/bin/env bash
+# Installs everything conesight needs on a fresh machine, idempotently, into build/:
+#   build/venv/                         Python virtual environment (requirements below)
+#   build/onnxruntime/libonnxruntime.so.1.31.1   ONNX Runtime shared library for `ort` (load-dynamic),
+#                                       taken from the PyPI wheel onnxruntime==1.31.1
+# Re-running is cheap: each step is skipped when its stamp matches its inputs.
+set -euo pipefail
+
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+BUILD="$ROOT/build"
+VENV="$BUILD/venv"
+ORT_VERSION="1.31.1"
+ORT_DIR="$BUILD/onnxruntime"
+ORT_LIB="$ORT_DIR/libonnxruntime.so.$ORT_VERSION"
+PYTHON="${PYTHON:-python3}"
+mkdir -p "$BUILD"
+
+log() { printf '[setup] %s\n' "$*"; }
+
+# --- Debian packages (only what pip wheels and the Rust build cannot bring) -----------------
+need_apt=()
+command -v unzip >/dev/null 2>&1 || need_apt+=(unzip)
+"$PYTHON" -c 'import venv, ensurepip' >/dev/null 2>&1 || need_apt+=(python3-venv)
+if [ ${#need_apt[@]} -gt 0 ]; then
+  if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+    log "installing Debian packages: ${need_apt[*]}"
+    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${need_apt[@]}" >/dev/null
+  else
+    log "missing ${need_apt[*]}: install them with your package manager (e.g. sudo apt-get install ${need_apt[*]})"
+    exit 1
+  fi
+fi
+
+# --- Python virtual environment --------------------------------------------------------------
+REQ="$ROOT/scripts/requirements.txt"
+REQ_TRAIN="$ROOT/training/requirements.txt"
+stamp_inputs="$( { cat "$REQ"; [ ! -f "$REQ_TRAIN" ] || cat "$REQ_TRAIN"; } | sha256sum | cut -c1-16)"
+if [ ! -x "$VENV/bin/python" ]; then
+  log "creating Python virtual environment in $VENV"
+  "$PYTHON" -m venv "$VENV"
+fi
+if [ "$(cat "$VENV/.stamp" 2>/dev/null)" != "$stamp_inputs" ]; then
+  log "installing Python packages (scripts/requirements.txt, training/requirements.txt)"
+  "$VENV/bin/python" -m pip install -q --upgrade pip
+  "$VENV/bin/python" -m pip install -q -r "$REQ"
+  if [ -f "$REQ_TRAIN" ]; then
+    "$VENV/bin/python" -m pip install -q -r "$REQ_TRAIN"
+  fi
+  echo "$stamp_inputs" > "$VENV/.stamp"
+fi
+
+# --- ONNX Runtime shared library from the PyPI wheel -----------------------------------------
+if [ ! -f "$ORT_LIB" ]; then
+  log "fetching onnxruntime==$ORT_VERSION wheel for its shared library"
+  tmp="$(mktemp -d)"
+  trap 'rm -rf "$tmp"' EXIT
+  "$VENV/bin/python" -m pip download -q --no-deps --only-binary=:all: -d "$tmp" "onnxruntime==$ORT_VERSION"
+  wheel="$(ls "$tmp"/onnxruntime-*.whl)"
+  mkdir -p "$ORT_DIR"
+  unzip -q -o -j "$wheel" "onnxruntime/capi/libonnxruntime.so.$ORT_VERSION" -d "$ORT_DIR"
+  log "ONNX Runtime library at $ORT_LIB"
+fi
+
+log "ready: ORT_DYLIB_PATH=$ORT_LIB, Python at $VENV/bin/python"
