@@ -76,4 +76,19 @@ pub enum GeometryError {
         /// Why.
         reason: &'static str,
     },
+    /// The camera is inside the cone's (extended) body surface or directly above its top, so
+    /// no ray from it grazes the body: the cone has no left and right silhouette.
+    #[error(
+        "camera at {horizontal_distance_m} m from the cone axis and {height_m} m high sees no \
+         cone silhouette (the body surface extended to that height has radius \
+         {radius_at_camera_height_m} m); the camera must be outside the cone"
+    )]
+    NoSilhouette {
+        /// Horizontal distance of the camera centre from the cone axis.
+        horizontal_distance_m: f64,
+        /// Height of the camera centre above the cone's base.
+        height_m: f64,
+        /// Signed radius of the extended body surface at the camera's height.
+        radius_at_camera_height_m: f64,
+    },
 }

@@ -16,7 +16,11 @@
 //! Units: metres, radians, pixels (`_px`).
 
 pub mod camera;
+pub mod cone;
 pub mod error;
 
 pub use camera::{Camera, Distortion, Extrinsics};
+pub use cone::{
+    CR3D, ConeClass, ConeModel, KEYPOINT_COUNT, Keypoint, cross_ratio, silhouette_keypoints,
+};
 pub use error::{ConfigError, GeometryError};
