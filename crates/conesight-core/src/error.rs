@@ -70,12 +70,6 @@ pub enum GeometryError {
         /// Number available.
         got: usize,
     },
-    /// The solver did not converge or the problem is degenerate.
-    #[error("solver failed: {reason}")]
-    SolverFailed {
-        /// Why.
-        reason: &'static str,
-    },
     /// The camera is inside the cone's (extended) body surface or directly above its top, so
     /// no ray from it grazes the body: the cone has no left and right silhouette.
     #[error(
@@ -90,5 +84,42 @@ pub enum GeometryError {
         height_m: f64,
         /// Signed radius of the extended body surface at the camera's height.
         radius_at_camera_height_m: f64,
+    },
+    /// Two inputs that must have one entry per correspondence have different lengths.
+    #[error("{what}: lengths differ ({left} vs {right}); pass one entry per correspondence")]
+    LengthMismatch {
+        /// Which inputs.
+        what: &'static str,
+        /// Length of the first.
+        left: usize,
+        /// Length of the second.
+        right: usize,
+    },
+    /// A parameter is outside its valid range.
+    #[error("parameter `{name}` = {value} is invalid; expected {expected}")]
+    InvalidParameter {
+        /// The parameter.
+        name: &'static str,
+        /// Its value.
+        value: f64,
+        /// The valid range.
+        expected: &'static str,
+    },
+    /// RANSAC found no pose supported by enough inliers.
+    #[error(
+        "no consensus: best pose has {inliers} inliers, need {needed}; \
+         raise the inlier threshold or check the correspondences"
+    )]
+    NoConsensus {
+        /// Inliers of the best hypothesis.
+        inliers: usize,
+        /// Minimum required.
+        needed: usize,
+    },
+    /// The solver did not converge or the problem is degenerate.
+    #[error("solver failed: {reason}")]
+    SolverFailed {
+        /// Why.
+        reason: &'static str,
     },
 }

@@ -18,9 +18,11 @@
 pub mod camera;
 pub mod cone;
 pub mod error;
+pub mod pnp;
 
 pub use camera::{Camera, Distortion, Extrinsics};
 pub use cone::{
     CR3D, ConeClass, ConeModel, KEYPOINT_COUNT, Keypoint, cross_ratio, silhouette_keypoints,
 };
 pub use error::{ConfigError, GeometryError};
+pub use pnp::{ConeEstimate, ConeObservation, ConePnpParams, ConeSolver, solve_cone};
