@@ -11,11 +11,13 @@
 //!    measurement, so the loop is a pinhole model whose residuals are (first order) pixels.
 //! 2. Closed-form start: median over keypoint pairs of the range implied by their known
 //!    separation ([`super::cone_init`]).
-//! 3. Gauss-Newton IRLS with a robust loss (Cauchy by default) to expose outliers.
-//! 4. Keypoints with residual above `outlier_threshold_px` are dropped; if more than one is
-//!    flagged or the refit is inconsistent, a leave-one-out search over the 7 subsets picks
-//!    the best.
-//! 5. Plain weighted least squares on the inliers; covariance `(J^T W J)^-1 sigma^2`.
+//! 3. Fast path: Gauss-Newton least squares on all keypoints; if every residual is below half
+//!    the outlier threshold (3 sigma by default) that is the answer.
+//! 4. Otherwise Gauss-Newton IRLS with a robust loss (Cauchy by default) from the closed-form
+//!    start exposes outliers; keypoints with residual above `outlier_threshold_px` are
+//!    dropped; if more than one is flagged or the refit is inconsistent, a leave-one-out
+//!    search over the 7 subsets picks the best; then least squares on the inliers.
+//! 5. Covariance `(J^T W J)^-1 sigma^2` at the least squares solution.
 
 use nalgebra::{
     Matrix3, Matrix5, Point2, Point3, Rotation3, SMatrix, UnitQuaternion, Vector2, Vector3, Vector5,
@@ -33,7 +35,10 @@ use crate::error::GeometryError;
 /// distance (classification needs no more).
 const ROBUST_RELATIVE_TOLERANCE: f64 = 1e-4;
 /// Least squares stage stops when a step is below this fraction of the distance.
-const FINAL_RELATIVE_TOLERANCE: f64 = 1e-10;
+const FINAL_RELATIVE_TOLERANCE: f64 = 1e-6;
+/// The least squares fast path is accepted when every residual is below this fraction of the
+/// outlier threshold (3 sigma by default); otherwise the robust stages run.
+const FAST_PATH_THRESHOLD_FRACTION: f64 = 0.5;
 /// Step halvings tried before a Gauss-Newton stage gives up improving.
 const MAX_STEP_HALVINGS: usize = 8;
 
@@ -52,13 +57,18 @@ enum Mode {
 }
 
 impl Mode {
+    /// Number of free parameters; they come first in `[c_x, c_y, c_z, tilt_a, tilt_b]`.
+    fn dimension(self) -> usize {
+        match self {
+            Self::Free => 3,
+            Self::Ground => 2,
+            Self::Tilt => 5,
+        }
+    }
+
     /// Whether parameter `i` of `[c_x, c_y, c_z, tilt_a, tilt_b]` is free.
     fn active(self, i: usize) -> bool {
-        match self {
-            Self::Free => i < 3,
-            Self::Ground => i < 2,
-            Self::Tilt => true,
-        }
+        i < self.dimension()
     }
 }
 
@@ -74,9 +84,17 @@ struct State {
 }
 
 /// Residuals and Jacobians at a state.
+#[derive(Clone, Copy)]
 struct Linearisation {
     residuals: [Vector2<f64>; KEYPOINT_COUNT],
     jacobians: [Jacobian; KEYPOINT_COUNT],
+}
+
+/// A state with its linearisation.
+#[derive(Clone, Copy)]
+struct Fit {
+    state: State,
+    lin: Linearisation,
 }
 
 /// A cone solver for one camera, cone model and parameter set; reuse it across cones.
@@ -158,20 +176,39 @@ impl ConeSolver {
             &used,
             &(self.prior_rotation * Vector3::z()),
         )?;
-        let mut state = self.state_from_position(&start);
-        let mut iterations = 0;
+        let state = self.state_from_position(&start);
+        let mut fit = Fit {
+            state,
+            lin: self.linearise(&state, &measurements)?,
+        };
+        let start = fit;
 
-        // Robust stage.
-        let (robust, n) = self.gauss_newton(
-            &state,
+        // Fast path: plain least squares on every keypoint; done if all of them fit well.
+        let (least_squares, mut iterations) = self.gauss_newton(
+            start,
+            &measurements,
+            &used,
+            RobustLoss::Squared,
+            FINAL_RELATIVE_TOLERANCE,
+        )?;
+        let fast_limit = FAST_PATH_THRESHOLD_FRACTION * self.params.outlier_threshold_px;
+        if (0..KEYPOINT_COUNT)
+            .all(|k| !used[k] || least_squares.lin.residuals[k].norm() <= fast_limit)
+        {
+            return self.estimate(&least_squares, used, &measurements, iterations);
+        }
+
+        // Robust stage, from the (outlier-resistant) closed-form start.
+        let n;
+        (fit, n) = self.gauss_newton(
+            start,
             &measurements,
             &used,
             self.params.loss,
             ROBUST_RELATIVE_TOLERANCE,
         )?;
         iterations += n;
-        state = robust;
-        let mut inliers = self.classify(&state, &measurements, &used)?;
+        let mut inliers = self.classify(&fit.lin, &used);
         let flagged = used_count - count(&inliers);
 
         if flagged > 0 {
@@ -179,24 +216,23 @@ impl ConeSolver {
             let mut settled = false;
             if flagged == 1 {
                 let (refit, n) = self.gauss_newton(
-                    &state,
+                    fit,
                     &measurements,
                     &inliers,
                     RobustLoss::Squared,
                     ROBUST_RELATIVE_TOLERANCE,
                 )?;
                 iterations += n;
-                let refit_inliers = self.classify(&refit, &measurements, &used)?;
-                if refit_inliers == inliers {
-                    state = refit;
+                if self.classify(&refit.lin, &used) == inliers {
+                    fit = refit;
                     settled = true;
                 }
             }
             if !settled {
-                let (best, best_inliers, n) = self.leave_one_out(&state, &measurements, &used)?;
+                let (best, n) = self.leave_one_out(fit, &measurements, &used)?;
                 iterations += n;
-                state = best;
-                inliers = best_inliers;
+                fit = best;
+                inliers = self.classify(&fit.lin, &used);
             }
         }
         let inlier_count = count(&inliers);
@@ -207,15 +243,15 @@ impl ConeSolver {
             });
         }
         // Final least squares on the inliers.
-        let (state, n) = self.gauss_newton(
-            &state,
+        let (fit, n) = self.gauss_newton(
+            fit,
             &measurements,
             &inliers,
             RobustLoss::Squared,
             FINAL_RELATIVE_TOLERANCE,
         )?;
         iterations += n;
-        self.estimate(&state, &measurements, inliers, iterations)
+        self.estimate(&fit, inliers, &measurements, iterations)
     }
 
     /// Undistorts the keypoints and checks the weights.
@@ -325,21 +361,25 @@ impl ConeSolver {
     /// Robust cost over the used keypoints plus the tilt prior.
     fn cost(
         &self,
-        state: &State,
-        lin: &Linearisation,
+        fit: &Fit,
         measurements: &Measurements,
         used: &[bool; KEYPOINT_COUNT],
         loss: RobustLoss,
     ) -> f64 {
         let mut total = 0.0;
-        for ((residual, weight), keep) in lin.residuals.iter().zip(&measurements.weights).zip(used)
+        for ((residual, weight), keep) in fit
+            .lin
+            .residuals
+            .iter()
+            .zip(&measurements.weights)
+            .zip(used)
         {
             if *keep {
                 total += weight * loss.cost(residual.norm());
             }
         }
         if self.mode == Mode::Tilt {
-            total += 0.5 * (state.tilt / self.tilt_prior_scale()).norm_squared();
+            total += 0.5 * (fit.state.tilt / self.tilt_prior_scale()).norm_squared();
         }
         total
     }
@@ -363,34 +403,33 @@ impl ConeSolver {
     }
 
     /// Gauss-Newton / IRLS over the `used` keypoints with step halving. Returns the final
-    /// state and the iterations run.
+    /// fit and the iterations run.
     fn gauss_newton(
         &self,
-        start: &State,
+        start: Fit,
         measurements: &Measurements,
         used: &[bool; KEYPOINT_COUNT],
         loss: RobustLoss,
         relative_tolerance: f64,
-    ) -> Result<(State, usize), GeometryError> {
-        let mut state = *start;
-        let mut lin = self.linearise(&state, measurements)?;
-        let mut cost = self.cost(&state, &lin, measurements, used, loss);
+    ) -> Result<(Fit, usize), GeometryError> {
+        let mut fit = start;
+        let mut cost = self.cost(&fit, measurements, used, loss);
         let mut iterations = 0;
         while iterations < self.params.max_iterations {
             iterations += 1;
             let weights: [f64; KEYPOINT_COUNT] = std::array::from_fn(|k| {
                 if used[k] {
-                    measurements.weights[k] * loss.weight(lin.residuals[k].norm())
+                    measurements.weights[k] * loss.weight(fit.lin.residuals[k].norm())
                 } else {
                     0.0
                 }
             });
-            let (mut hessian, mut gradient) = self.normal_equations(&lin, &weights);
+            let (mut hessian, mut gradient) = self.normal_equations(&fit.lin, &weights);
             if self.mode == Mode::Tilt {
                 let prior = 1.0 / self.tilt_prior_scale().powi(2);
                 for i in 0..2 {
                     hessian[(3 + i, 3 + i)] += prior;
-                    gradient[3 + i] += prior * state.tilt[i];
+                    gradient[3 + i] += prior * fit.state.tilt[i];
                 }
             }
             let Some(cholesky) = hessian.cholesky() else {
@@ -402,13 +441,12 @@ impl ConeSolver {
             let mut scale = 1.0;
             let mut accepted = false;
             for _ in 0..MAX_STEP_HALVINGS {
-                let candidate = self.apply(&state, &(step * scale));
-                if let Ok(candidate_lin) = self.linearise(&candidate, measurements) {
-                    let candidate_cost =
-                        self.cost(&candidate, &candidate_lin, measurements, used, loss);
+                let state = self.apply(&fit.state, &(step * scale));
+                if let Ok(lin) = self.linearise(&state, measurements) {
+                    let candidate = Fit { state, lin };
+                    let candidate_cost = self.cost(&candidate, measurements, used, loss);
                     if candidate_cost <= cost * (1.0 + 1e-12) + 1e-300 {
-                        state = candidate;
-                        lin = candidate_lin;
+                        fit = candidate;
                         cost = candidate_cost;
                         accepted = true;
                         break;
@@ -416,35 +454,42 @@ impl ConeSolver {
                 }
                 scale *= 0.5;
             }
-            let distance = state.centre_in_cone.coords.norm();
+            let distance = fit.state.centre_in_cone.coords.norm();
             if !accepted || step.norm() * scale <= relative_tolerance * distance {
                 break;
             }
         }
-        Ok((state, iterations))
+        Ok((fit, iterations))
     }
 
     /// `J^T W J` and `J^T W r` with inactive parameters pinned (unit diagonal, zero gradient).
+    /// The free parameters are always the first `dimension` ones.
     fn normal_equations(
         &self,
         lin: &Linearisation,
         weights: &[f64; KEYPOINT_COUNT],
     ) -> (Matrix5<f64>, Vector5<f64>) {
-        let mut hessian = Matrix5::zeros();
+        let dimension = self.mode.dimension();
+        let mut hessian = Matrix5::identity();
         let mut gradient = Vector5::zeros();
+        for i in 0..dimension {
+            hessian[(i, i)] = 0.0;
+        }
         for ((jacobian, residual), w) in lin.jacobians.iter().zip(&lin.residuals).zip(weights) {
             if *w == 0.0 {
                 continue;
             }
-            hessian += jacobian.transpose() * jacobian * *w;
-            gradient += jacobian.transpose() * residual * *w;
+            for i in 0..dimension {
+                let (a0, a1) = (jacobian[(0, i)] * w, jacobian[(1, i)] * w);
+                gradient[i] += a0 * residual.x + a1 * residual.y;
+                for j in i..dimension {
+                    hessian[(i, j)] += a0 * jacobian[(0, j)] + a1 * jacobian[(1, j)];
+                }
+            }
         }
-        for i in 0..5 {
-            if !self.mode.active(i) {
-                hessian.row_mut(i).fill(0.0);
-                hessian.column_mut(i).fill(0.0);
-                hessian[(i, i)] = 1.0;
-                gradient[i] = 0.0;
+        for i in 0..dimension {
+            for j in 0..i {
+                hessian[(i, j)] = hessian[(j, i)];
             }
         }
         (hessian, gradient)
@@ -453,25 +498,23 @@ impl ConeSolver {
     /// Used keypoints whose residual is within the outlier threshold.
     fn classify(
         &self,
-        state: &State,
-        measurements: &Measurements,
+        lin: &Linearisation,
         used: &[bool; KEYPOINT_COUNT],
-    ) -> Result<[bool; KEYPOINT_COUNT], GeometryError> {
-        let lin = self.linearise(state, measurements)?;
-        Ok(std::array::from_fn(|k| {
+    ) -> [bool; KEYPOINT_COUNT] {
+        std::array::from_fn(|k| {
             used[k] && lin.residuals[k].norm() <= self.params.outlier_threshold_px
-        }))
+        })
     }
 
     /// Least squares on each subset leaving one used keypoint out; keeps the subset with the
-    /// smallest cost, then classifies every keypoint against it.
+    /// smallest cost.
     fn leave_one_out(
         &self,
-        start: &State,
+        start: Fit,
         measurements: &Measurements,
         used: &[bool; KEYPOINT_COUNT],
-    ) -> Result<(State, [bool; KEYPOINT_COUNT], usize), GeometryError> {
-        let mut best: Option<(f64, State)> = None;
+    ) -> Result<(Fit, usize), GeometryError> {
+        let mut best: Option<(f64, Fit)> = None;
         let mut iterations = 0;
         for left_out in 0..KEYPOINT_COUNT {
             if !used[left_out] {
@@ -479,7 +522,7 @@ impl ConeSolver {
             }
             let mut subset = *used;
             subset[left_out] = false;
-            let Ok((state, n)) = self.gauss_newton(
+            let Ok((fit, n)) = self.gauss_newton(
                 start,
                 measurements,
                 &subset,
@@ -489,32 +532,28 @@ impl ConeSolver {
                 continue;
             };
             iterations += n;
-            let Ok(lin) = self.linearise(&state, measurements) else {
-                continue;
-            };
-            let cost = self.cost(&state, &lin, measurements, &subset, RobustLoss::Squared);
+            let cost = self.cost(&fit, measurements, &subset, RobustLoss::Squared);
             if best.as_ref().is_none_or(|(c, _)| cost < *c) {
-                best = Some((cost, state));
+                best = Some((cost, fit));
             }
         }
-        let Some((_, state)) = best else {
+        let Some((_, fit)) = best else {
             return Err(GeometryError::SolverFailed {
                 reason: "every leave-one-out subset failed",
             });
         };
-        let inliers = self.classify(&state, measurements, used)?;
-        Ok((state, inliers, iterations))
+        Ok((fit, iterations))
     }
 
     /// Position, covariance and diagnostics at the final state.
     fn estimate(
         &self,
-        state: &State,
-        measurements: &Measurements,
+        fit: &Fit,
         inliers: [bool; KEYPOINT_COUNT],
+        measurements: &Measurements,
         iterations: usize,
     ) -> Result<ConeEstimate, GeometryError> {
-        let lin = self.linearise(state, measurements)?;
+        let (state, lin) = (&fit.state, &fit.lin);
         let sigma2 = self.params.keypoint_sigma_px.powi(2);
         let weights: [f64; KEYPOINT_COUNT] = std::array::from_fn(|k| {
             if inliers[k] {
@@ -523,7 +562,7 @@ impl ConeSolver {
                 0.0
             }
         });
-        let (mut information, _) = self.normal_equations(&lin, &weights);
+        let (mut information, _) = self.normal_equations(lin, &weights);
         if self.mode == Mode::Tilt {
             let prior = 1.0 / self.params.tilt_prior_sigma_rad.powi(2);
             for i in 0..2 {
