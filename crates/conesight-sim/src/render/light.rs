@@ -1,0 +1,201 @@
+//! Light: sky radiance (gradient, sun glow, clouds, backdrop of trees or buildings), surface
+//! shading, and cast shadows on the ground as convex polygons.
+//!
+//! Shadows: every solid is sampled at its outline points, which are projected along the sun
+//! direction onto the ground; the convex hull of the projections is the shadow (exact for
+//! convex solids; a cone is split into its plate and its body). Shadows fall on the ground only.
+
+use nalgebra::{Isometry3, Point2, Point3, Vector3};
+
+use super::texture::NoiseTable;
+use crate::scene::Environment;
+
+/// Width of the soft shadow edge, metres.
+const PENUMBRA_M: f64 = 0.03;
+/// Distance at which haze halves contrast, metres.
+const HAZE_DISTANCE_M: f64 = 350.0;
+
+/// A convex shadow polygon on the ground, counter-clockwise, with its image rectangle.
+#[derive(Debug, Clone)]
+pub struct ShadowPolygon {
+    /// Vertices (world x, y), counter-clockwise.
+    pub vertices: Vec<Point2<f64>>,
+    /// Image rectangle `[col_min, row_min, col_max, row_max]`.
+    pub rect: [i64; 4],
+}
+
+impl ShadowPolygon {
+    /// Light factor at a ground point: 0 deep inside, 1 outside, soft at the edge.
+    pub fn light_at(&self, p: &Point2<f64>) -> f64 {
+        let n = self.vertices.len();
+        let mut outside = f64::NEG_INFINITY;
+        for i in 0..n {
+            let a = self.vertices[i];
+            let b = self.vertices[(i + 1) % n];
+            let e = b - a;
+            let len = e.norm();
+            if len < 1e-12 {
+                continue;
+            }
+            // Signed distance, positive to the right of a CCW edge (outside).
+            let d = (e.x * (p.y - a.y) - e.y * (p.x - a.x)) / len;
+            outside = outside.max(-d);
+            if outside > PENUMBRA_M {
+                return 1.0;
+            }
+        }
+        (0.5 + outside / PENUMBRA_M).clamp(0.0, 1.0)
+    }
+}
+
+/// The shadow of points given in a local frame, or `None` when the sun is below the horizon.
+pub fn shadow_hull(
+    world_from_local: &Isometry3<f64>,
+    points_local: &[Point3<f64>],
+    sun: &Vector3<f64>,
+) -> Option<Vec<Point2<f64>>> {
+    if sun.z <= 0.05 {
+        return None;
+    }
+    let projected: Vec<Point2<f64>> = points_local
+        .iter()
+        .map(|p| {
+            let w = world_from_local * p;
+            let s = w.z.max(0.0) / sun.z;
+            Point2::new(w.x - s * sun.x, w.y - s * sun.y)
+        })
+        .collect();
+    let hull = convex_hull(projected);
+    (hull.len() >= 3).then_some(hull)
+}
+
+/// Andrew's monotone chain; counter-clockwise.
+pub fn convex_hull(mut points: Vec<Point2<f64>>) -> Vec<Point2<f64>> {
+    points.sort_by(|a, b| a.x.total_cmp(&b.x).then(a.y.total_cmp(&b.y)));
+    points.dedup();
+    if points.len() < 3 {
+        return points;
+    }
+    let cross = |o: &Point2<f64>, a: &Point2<f64>, b: &Point2<f64>| {
+        (a.x - o.x) * (b.y - o.y) - (a.y - o.y) * (b.x - o.x)
+    };
+    let mut hull: Vec<Point2<f64>> = Vec::with_capacity(2 * points.len());
+    for p in points.iter().chain(points.iter().rev().skip(1)) {
+        while hull.len() >= 2 && cross(&hull[hull.len() - 2], &hull[hull.len() - 1], p) <= 0.0 {
+            hull.pop();
+        }
+        hull.push(*p);
+    }
+    hull.pop();
+    hull
+}
+
+/// Points on a horizontal circle of `radius` at height `z` (local frame).
+pub fn circle_points(radius: f64, z: f64, count: usize) -> impl Iterator<Item = Point3<f64>> {
+    (0..count).map(move |i| {
+        let a = std::f64::consts::TAU * i as f64 / count as f64;
+        Point3::new(radius * a.cos(), radius * a.sin(), z)
+    })
+}
+
+/// Irradiance-weighted shading of a surface with unit normal `n` (world), seen along the unit
+/// ray `view`: `albedo * (ambient + sun * cos * lit) + specular`.
+pub fn shade(
+    env: &Environment,
+    albedo: [f32; 3],
+    n: &Vector3<f64>,
+    view: &Vector3<f64>,
+    lit: f32,
+    gloss: f32,
+) -> [f32; 3] {
+    let sun = Vector3::from(env.sun_direction);
+    let cos = n.dot(&sun).max(0.0) as f32 * lit;
+    let sky = (0.65 + 0.35 * n.z) as f32;
+    let half = (sun - view).normalize();
+    let spec = if cos > 0.0 && gloss > 0.0 {
+        gloss * (n.dot(&half).max(0.0) as f32).powi(48)
+    } else {
+        0.0
+    };
+    [0, 1, 2].map(|c| {
+        albedo[c] * (env.ambient_rgb[c] * sky + env.sun_rgb[c] * cos) + spec * env.sun_rgb[c]
+    })
+}
+
+/// Fast atan2 approximation (max error ~0.005 rad).
+fn fast_atan2(y: f32, x: f32) -> f32 {
+    let (ax, ay) = (x.abs(), y.abs());
+    let (mn, mx) = (ax.min(ay), ax.max(ay).max(1e-20));
+    let a = mn / mx;
+    let s = a * a;
+    let mut r = ((-0.046_496_473 * s + 0.159_314_22) * s - 0.327_622_77) * s * a + a;
+    if ay > ax {
+        r = std::f32::consts::FRAC_PI_2 - r;
+    }
+    if x < 0.0 {
+        r = std::f32::consts::PI - r;
+    }
+    if y < 0.0 { -r } else { r }
+}
+
+/// Radiance of the sky or backdrop along unit world direction `d`.
+pub fn sky(env: &Environment, noise: &NoiseTable, d: &Vector3<f64>) -> [f32; 3] {
+    let dz = d.z as f32;
+    let azimuth = fast_atan2(d.y as f32, d.x as f32);
+    // Backdrop: a ragged band above the horizon.
+    let profile = noise.value(azimuth * 12.0, 7.5) * 0.7 + noise.value(azimuth * 60.0, 3.5) * 0.3;
+    let band = env.backdrop_height_rad * (0.3 + profile);
+    if dz < band {
+        let detail = 0.7 + 0.6 * noise.value(azimuth * 400.0, dz * 400.0);
+        let light = [0, 1, 2].map(|c| env.ambient_rgb[c] * 0.8 + env.sun_rgb[c] * 0.25);
+        let haze = 0.35;
+        return [0, 1, 2].map(|c| {
+            let surface = env.backdrop_rgb[c] * detail * light[c];
+            surface * (1.0 - haze) + env.sky_horizon_rgb[c] * haze
+        });
+    }
+    let t = (dz.max(0.0) * 2.5).min(1.0).sqrt();
+    let mut colour = [0, 1, 2]
+        .map(|c| env.sky_horizon_rgb[c] + (env.sky_zenith_rgb[c] - env.sky_horizon_rgb[c]) * t);
+    if env.cloudiness > 0.0 && dz > 0.01 {
+        let (u, v) = (d.x as f32 / dz, d.y as f32 / dz);
+        let cloud = noise.fbm(u * 3.0 + 40.0, v * 3.0, 2.0, 4, 0.001) + 0.5;
+        let cover = ((cloud - (1.0 - env.cloudiness)) * 3.0).clamp(0.0, 1.0);
+        let grey = 0.75 + 0.25 * cloud;
+        colour = colour.map(|c| c + (grey - c) * cover);
+    }
+    let sun = Vector3::from(env.sun_direction);
+    let glow = (d.dot(&sun).max(0.0) as f32).powi(64) * (1.0 - env.cloudiness);
+    [0, 1, 2].map(|c| colour[c] + glow * env.sun_rgb[c] * 0.5)
+}
+
+/// Blends a surface colour towards the horizon haze with distance.
+pub fn haze(env: &Environment, colour: [f32; 3], distance_m: f64) -> [f32; 3] {
+    let f = (1.0 - (-distance_m / HAZE_DISTANCE_M).exp()) as f32;
+    [0, 1, 2].map(|c| colour[c] + (env.sky_horizon_rgb[c] - colour[c]) * f)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hull_and_shadow_light() {
+        let hull = convex_hull(vec![
+            Point2::new(0.0, 0.0),
+            Point2::new(1.0, 0.0),
+            Point2::new(0.5, 0.5),
+            Point2::new(1.0, 1.0),
+            Point2::new(0.0, 1.0),
+        ]);
+        assert_eq!(hull.len(), 4);
+        let poly = ShadowPolygon {
+            vertices: hull,
+            rect: [0, 0, 0, 0],
+        };
+        assert_eq!(poly.light_at(&Point2::new(0.5, 0.5)), 0.0);
+        assert_eq!(poly.light_at(&Point2::new(2.0, 0.5)), 1.0);
+        assert!((poly.light_at(&Point2::new(1.0, 0.5)) - 0.5).abs() < 1e-9);
+        assert!((fast_atan2(1.0, -1.0) - 2.356_194).abs() < 0.01);
+    }
+}

@@ -1,0 +1,159 @@
+//! Albedo of surfaces: cones (body colour, stripes, dirt, scuffs), distractors and the ground.
+
+use conesight_core::cone::{ConeClass, ConeModel};
+
+use super::texture::NoiseTable;
+use crate::scene::{ConeAppearance, Environment, GroundKind};
+
+/// Linear albedo of a cone's main colour and its stripe colour.
+pub fn cone_colours(class: ConeClass) -> ([f32; 3], [f32; 3]) {
+    match class {
+        ConeClass::Blue => ([0.012, 0.04, 0.30], [0.62, 0.62, 0.6]),
+        ConeClass::Yellow => ([0.62, 0.42, 0.012], [0.025, 0.025, 0.025]),
+        ConeClass::Orange | ConeClass::LargeOrange => ([0.72, 0.13, 0.012], [0.62, 0.62, 0.6]),
+    }
+}
+
+/// Dirt colour (linear).
+const DIRT_RGB: [f32; 3] = [0.12, 0.09, 0.06];
+
+/// Albedo of a cone surface point given in the cone frame (`z_m` height, `azimuth_rad` about
+/// the axis). `on_plate` selects the base plate (same plastic, slightly darker).
+pub fn cone_albedo(
+    class: ConeClass,
+    model: &ConeModel,
+    appearance: &ConeAppearance,
+    noise: &NoiseTable,
+    z_m: f64,
+    azimuth_rad: f64,
+    on_plate: bool,
+) -> [f32; 3] {
+    let (body, stripe) = cone_colours(class);
+    let in_stripe = !on_plate && model.stripes.iter().any(|(lo, hi)| z_m >= *lo && z_m < *hi);
+    // Surface coordinates for patterns: around the circumference and up the side, metres.
+    let u = (azimuth_rad as f32) * 0.12;
+    let v = z_m as f32;
+    let key_offset = (appearance.pattern_key % 997) as f32;
+    let mut colour = if in_stripe {
+        // Scuffs: patches where the stripe is worn through to the body colour.
+        let scuff = noise.value(u * 40.0 + key_offset, v * 40.0);
+        if scuff < appearance.scuff * 0.55 {
+            mix(stripe, body, 0.7)
+        } else {
+            stripe
+        }
+    } else {
+        body
+    };
+    if on_plate {
+        colour = colour.map(|c| c * 0.75);
+    }
+    // Dirt: stronger towards the base, patchy.
+    if appearance.dirt > 0.0 {
+        let height_weight = (1.0 - (z_m as f32) / (model.body_height_m as f32)).clamp(0.0, 1.0);
+        let patch = noise.value(u * 25.0 + 300.0 + key_offset, v * 25.0);
+        let amount =
+            (appearance.dirt * height_weight * height_weight * (0.4 + patch)).clamp(0.0, 0.8);
+        colour = mix(colour, DIRT_RGB, amount);
+    }
+    let grain = 1.0 + 0.06 * (noise.value(u * 200.0 + key_offset, v * 200.0) - 0.5);
+    let scale = appearance.brightness * grain;
+    [
+        colour[0] * scale * appearance.tint[0],
+        colour[1] * scale * appearance.tint[1],
+        colour[2] * scale * appearance.tint[2],
+    ]
+}
+
+/// Linear interpolation between two colours.
+pub fn mix(a: [f32; 3], b: [f32; 3], t: f32) -> [f32; 3] {
+    [
+        a[0] + (b[0] - a[0]) * t,
+        a[1] + (b[1] - a[1]) * t,
+        a[2] + (b[2] - a[2]) * t,
+    ]
+}
+
+/// Ground albedo at world `(x, y)`; `footprint_m` is the ground size of one pixel there.
+pub fn ground_albedo(
+    env: &Environment,
+    noise: &NoiseTable,
+    x_m: f64,
+    y_m: f64,
+    footprint_m: f32,
+) -> [f32; 3] {
+    let (x, y) = (x_m as f32, y_m as f32);
+    let mut colour = env.ground_rgb;
+    let (wavelength, contrast) = match env.ground {
+        GroundKind::Asphalt => (0.05, 0.9),
+        GroundKind::Concrete => (0.1, 0.5),
+        GroundKind::Grass => (0.04, 1.2),
+    };
+    // Large-scale blotches, medium stains, fine grain.
+    let large = noise.fbm(x, y, 12.0, 2, footprint_m);
+    let fine = noise.fbm(x + 500.0, y, wavelength * 8.0, 4, footprint_m);
+    let variation = 1.0 + 0.6 * large + contrast * fine;
+    colour = colour.map(|c| c * variation);
+    if env.patch_fraction > 0.0 {
+        let patch = noise.fbm(x + 1000.0, y - 700.0, 20.0, 3, footprint_m) + 0.5;
+        let edge = ((patch - (1.0 - env.patch_fraction)) * 12.0).clamp(0.0, 1.0);
+        if edge > 0.0 {
+            let texture = 1.0 + 1.2 * noise.fbm(x, y + 900.0, 0.3, 3, footprint_m);
+            colour = mix(colour, env.patch_rgb.map(|c| c * texture), edge);
+        }
+    }
+    if env.ground == GroundKind::Concrete {
+        // Slab joints every 5 m.
+        let joint = |c: f32| {
+            let d = (c / 5.0 - (c / 5.0).round()).abs() * 5.0;
+            d < 0.012_f32.max(0.5 * footprint_m)
+        };
+        if joint(x) || joint(y) {
+            colour = colour.map(|c| c * 0.55);
+        }
+    }
+    for line in &env.lines {
+        let d = distance_to_segment(
+            x_m,
+            y_m,
+            line.from_m.x,
+            line.from_m.y,
+            line.to_m.x,
+            line.to_m.y,
+        );
+        let half = 0.5 * line.width_m;
+        if d < half + f64::from(footprint_m) {
+            let coverage = ((half + 0.5 * f64::from(footprint_m) - d)
+                / f64::from(footprint_m).max(1e-4))
+            .clamp(0.0, 1.0) as f32;
+            let wear = noise.value(x * 3.0 + 50.0, y * 3.0);
+            colour = mix(colour, line.albedo, coverage * (0.5 + 0.5 * wear));
+        }
+    }
+    for mark in &env.tyre_marks {
+        let (dx, dy) = (x_m - mark.centre_m.x, y_m - mark.centre_m.y);
+        let r = dx.hypot(dy);
+        if (r - mark.radius_m).abs() < 0.5 * mark.width_m {
+            let a = dy.atan2(dx);
+            let (a0, a1) = mark.angles_rad;
+            let rel = (a - a0).rem_euclid(std::f64::consts::TAU);
+            if rel <= a1 - a0 {
+                let streak = noise.value(x * 8.0, y * 8.0 + 200.0);
+                colour = colour.map(|c| c * (1.0 - mark.strength * (0.5 + 0.5 * streak)));
+            }
+        }
+    }
+    colour
+}
+
+/// Distance from a point to a segment, metres.
+fn distance_to_segment(px: f64, py: f64, ax: f64, ay: f64, bx: f64, by: f64) -> f64 {
+    let (vx, vy) = (bx - ax, by - ay);
+    let len2 = vx * vx + vy * vy;
+    let t = if len2 > 0.0 {
+        (((px - ax) * vx + (py - ay) * vy) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (px - ax - t * vx).hypot(py - ay - t * vy)
+}

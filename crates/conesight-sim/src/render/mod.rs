@@ -1,0 +1,580 @@
+//! The ray-casting renderer.
+//!
+//! - [`raycast`]: exact intersections (cones as surfaces of revolution with their base plate,
+//!   boxes, cylinders, spheres) and image-space bounding rectangles.
+//! - [`materials`]: albedo of cones (stripes, dirt, scuffs), distractors and ground.
+//! - [`texture`]: multi-octave value noise.
+//! - [`light`]: sky, shading, ground shadows.
+//! - [`post`]: camera effects and tone mapping.
+//!
+//! Entry: [`Renderer::new`] (per camera: builds the per-pixel ray table, undistorting once),
+//! then [`Renderer::render`] per scene. Rows are rendered in parallel; the result does not
+//! depend on the number of threads. Pixel `(col, row)` is the ray through the continuous pixel
+//! coordinate `(col, row)` (OpenCV convention); pixels where the object id changes are
+//! re-rendered with 4 sub-samples (anti-aliasing). The object-id buffer keeps the centre sample.
+
+pub mod light;
+pub mod materials;
+pub mod post;
+pub mod raycast;
+pub mod texture;
+
+use conesight_core::Camera;
+use image::RgbImage;
+use nalgebra::{Isometry3, Matrix3, Point2, Point3, Vector3};
+use rayon::prelude::*;
+
+use crate::{
+    error::SimError,
+    scene::{DistractorShape, Scene},
+};
+use light::{ShadowPolygon, circle_points, shadow_hull};
+use raycast::{FieldOfView, Part, Placed, Solid};
+use texture::NoiseTable;
+
+/// Sub-sample offsets for edge anti-aliasing (rotated grid), pixels.
+const SUBSAMPLES: [(f64, f64); 4] = [
+    (-0.375, -0.125),
+    (0.125, -0.375),
+    (0.375, 0.125),
+    (-0.125, 0.375),
+];
+/// Object id of the ground and the sky.
+pub const BACKGROUND_ID: u32 = 0;
+
+/// A camera ready for rendering: the unit-z ray of every pixel.
+#[derive(Debug, Clone)]
+pub struct Renderer {
+    camera: Camera,
+    rays: Vec<[f32; 2]>,
+    fov: FieldOfView,
+}
+
+/// Pixel coverage of one cone.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Coverage {
+    /// Pixels whose centre sample shows this cone.
+    pub visible_px: u64,
+    /// Pixels whose centre ray hits this cone, whatever is in front of it.
+    pub unoccluded_px: u64,
+    /// Inclusive pixel range `[col_min, row_min, col_max, row_max]` of the visible pixels.
+    pub visible_range: Option<[u32; 4]>,
+}
+
+/// A rendered frame.
+#[derive(Debug, Clone)]
+pub struct Rendered {
+    /// The 8-bit sRGB image with camera effects.
+    pub image: RgbImage,
+    /// Object id per pixel (row-major): 0 background, `1..=cones` the scene's cones in order,
+    /// then distractors.
+    pub object_ids: Vec<u32>,
+    /// Per-cone coverage, indexed like `scene.world.cones`.
+    pub coverage: Vec<Coverage>,
+}
+
+/// Everything a ray needs for one frame.
+struct Frame<'a> {
+    scene: &'a Scene,
+    objects: Vec<Placed>,
+    shadows: Vec<ShadowPolygon>,
+    world_from_camera: Matrix3<f64>,
+    camera_centre: Vector3<f64>,
+    noise: NoiseTable,
+    cone_count: u32,
+    fx: f64,
+}
+
+impl Renderer {
+    /// Builds the ray table for `camera` (undistorts every pixel once).
+    pub fn new(camera: Camera) -> Result<Self, SimError> {
+        let bad = |reason: String| SimError::BadCamera {
+            width_px: camera.width_px,
+            height_px: camera.height_px,
+            reason,
+        };
+        if camera.width_px == 0 || camera.height_px == 0 {
+            return Err(bad("zero size".into()));
+        }
+        if !(camera.fx_px > 0.0 && camera.fy_px > 0.0) {
+            return Err(bad("focal length must be positive".into()));
+        }
+        let (w, h) = (camera.width_px as usize, camera.height_px as usize);
+        let rows: Vec<Result<Vec<[f32; 2]>, SimError>> = (0..h)
+            .into_par_iter()
+            .map(|row| {
+                (0..w)
+                    .map(|col| {
+                        let n = camera
+                            .unproject_normalized(&Point2::new(col as f64, row as f64))
+                            .map_err(|e| {
+                                bad(format!("pixel ({col}, {row}) does not undistort: {e}"))
+                            })?;
+                        Ok([n.x as f32, n.y as f32])
+                    })
+                    .collect()
+            })
+            .collect();
+        let mut rays = Vec::with_capacity(w * h);
+        for row in rows {
+            rays.extend(row?);
+        }
+        let mut min = [f64::INFINITY; 2];
+        let mut max = [f64::NEG_INFINITY; 2];
+        for r in &rays {
+            for a in 0..2 {
+                min[a] = min[a].min(f64::from(r[a]));
+                max[a] = max[a].max(f64::from(r[a]));
+            }
+        }
+        Ok(Self {
+            camera,
+            rays,
+            fov: FieldOfView::from_border(min, max),
+        })
+    }
+
+    /// The camera.
+    pub fn camera(&self) -> &Camera {
+        &self.camera
+    }
+
+    /// The camera-frame ray (z = 1) at a continuous pixel coordinate, by bilinear
+    /// interpolation of the table (exact at pixel centres).
+    fn ray_at(&self, x: f64, y: f64) -> Vector3<f64> {
+        let (w, h) = (
+            self.camera.width_px as usize,
+            self.camera.height_px as usize,
+        );
+        let x = x.clamp(0.0, (w - 1) as f64);
+        let y = y.clamp(0.0, (h - 1) as f64);
+        let (x0, y0) = (x.floor() as usize, y.floor() as usize);
+        let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
+        let (fx, fy) = (x - x0 as f64, y - y0 as f64);
+        let at = |c: usize, r: usize| self.rays[r * w + c].map(f64::from);
+        let mut n = [0.0; 2];
+        for (a, v) in n.iter_mut().enumerate() {
+            let top = at(x0, y0)[a] + (at(x1, y0)[a] - at(x0, y0)[a]) * fx;
+            let bottom = at(x0, y1)[a] + (at(x1, y1)[a] - at(x0, y1)[a]) * fx;
+            *v = top + (bottom - top) * fy;
+        }
+        Vector3::new(n[0], n[1], 1.0)
+    }
+
+    /// Renders a scene. The scene's camera must be this renderer's camera.
+    pub fn render(&self, scene: &Scene) -> Result<Rendered, SimError> {
+        if scene.camera != self.camera {
+            return Err(SimError::BadCamera {
+                width_px: scene.camera.width_px,
+                height_px: scene.camera.height_px,
+                reason: "the scene's camera differs from the renderer's; build a Renderer for it"
+                    .into(),
+            });
+        }
+        let frame = self.prepare(scene);
+        let (w, h) = (
+            self.camera.width_px as usize,
+            self.camera.height_px as usize,
+        );
+        let mut linear = vec![[0.0_f32; 3]; w * h];
+        let mut ids = vec![BACKGROUND_ID; w * h];
+        let cone_count = frame.cone_count as usize;
+        // Pass 1: one sample per pixel; count unoccluded cone hits per row.
+        let unoccluded: Vec<Vec<(u32, u64)>> = linear
+            .par_chunks_mut(w)
+            .zip(ids.par_chunks_mut(w))
+            .enumerate()
+            .map(|(row, (colours, row_ids))| {
+                let active: Vec<&Placed> = frame
+                    .objects
+                    .iter()
+                    .filter(|o| o.rect[1] <= row as i64 && o.rect[3] >= row as i64)
+                    .collect();
+                let shadows: Vec<&ShadowPolygon> = frame
+                    .shadows
+                    .iter()
+                    .filter(|s| s.rect[1] <= row as i64 && s.rect[3] >= row as i64)
+                    .collect();
+                let mut counts: Vec<(u32, u64)> = Vec::new();
+                for col in 0..w {
+                    let ray = self.ray_at(col as f64, row as f64);
+                    let (colour, id) = frame.cast(
+                        &ray,
+                        col as i64,
+                        row as i64,
+                        &active,
+                        &shadows,
+                        Some(&mut counts),
+                    );
+                    colours[col] = colour;
+                    row_ids[col] = id;
+                }
+                counts
+            })
+            .collect();
+        // Pass 2: anti-alias pixels on id edges.
+        let ids_ref = &ids;
+        linear
+            .par_chunks_mut(w)
+            .enumerate()
+            .for_each(|(row, colours)| {
+                let active: Vec<&Placed> = frame
+                    .objects
+                    .iter()
+                    .filter(|o| o.rect[1] <= row as i64 + 1 && o.rect[3] >= row as i64 - 1)
+                    .collect();
+                let shadows: Vec<&ShadowPolygon> = frame
+                    .shadows
+                    .iter()
+                    .filter(|s| s.rect[1] <= row as i64 + 1 && s.rect[3] >= row as i64 - 1)
+                    .collect();
+                for col in 0..w {
+                    let id = ids_ref[row * w + col];
+                    let differs = (col + 1 < w && ids_ref[row * w + col + 1] != id)
+                        || (col > 0 && ids_ref[row * w + col - 1] != id)
+                        || (row + 1 < h && ids_ref[(row + 1) * w + col] != id)
+                        || (row > 0 && ids_ref[(row - 1) * w + col] != id);
+                    if !differs {
+                        continue;
+                    }
+                    let mut sum = [0.0_f32; 3];
+                    for (dx, dy) in SUBSAMPLES {
+                        let ray = self.ray_at(col as f64 + dx, row as f64 + dy);
+                        let (colour, _) =
+                            frame.cast(&ray, col as i64, row as i64, &active, &shadows, None);
+                        sum = [sum[0] + colour[0], sum[1] + colour[1], sum[2] + colour[2]];
+                    }
+                    colours[col] = sum.map(|s| s * 0.25);
+                }
+            });
+        let mut coverage = vec![Coverage::default(); cone_count];
+        for row_counts in unoccluded {
+            for (id, count) in row_counts {
+                if let Some(c) = coverage.get_mut(id as usize - 1) {
+                    c.unoccluded_px += count;
+                }
+            }
+        }
+        for (index, id) in ids.iter().enumerate() {
+            if *id == BACKGROUND_ID || *id as usize > cone_count {
+                continue;
+            }
+            let (col, row) = ((index % w) as u32, (index / w) as u32);
+            let c = &mut coverage[*id as usize - 1];
+            c.visible_px += 1;
+            c.visible_range = Some(match c.visible_range {
+                None => [col, row, col, row],
+                Some([c0, r0, c1, r1]) => [c0.min(col), r0.min(row), c1.max(col), r1.max(row)],
+            });
+        }
+        let image = post::finish(
+            &mut linear,
+            self.camera.width_px,
+            self.camera.height_px,
+            &scene.effects,
+        )?;
+        Ok(Rendered {
+            image,
+            object_ids: ids,
+            coverage,
+        })
+    }
+
+    /// The id of the nearest object along the exact ray through each continuous pixel
+    /// coordinate (not the table), for keypoint visibility. Pixels that do not undistort give
+    /// the background id.
+    pub fn objects_at(&self, scene: &Scene, pixels: &[Point2<f64>]) -> Vec<u32> {
+        let frame = self.prepare(scene);
+        pixels
+            .iter()
+            .map(|pixel| {
+                let Ok(n) = self.camera.unproject_normalized(pixel) else {
+                    return BACKGROUND_ID;
+                };
+                let (col, row) = (pixel.x.round() as i64, pixel.y.round() as i64);
+                let active: Vec<&Placed> = frame
+                    .objects
+                    .iter()
+                    .filter(|o| o.covers(col, row))
+                    .collect();
+                let d = Vector3::new(n.x, n.y, 1.0);
+                let ground_t = {
+                    let dw = frame.world_from_camera * d;
+                    if dw.z < -1e-12 {
+                        -frame.camera_centre.z / dw.z
+                    } else {
+                        f64::INFINITY
+                    }
+                };
+                frame
+                    .nearest(&d, col, row, &active, None)
+                    .filter(|(_, hit)| hit.t < ground_t)
+                    .map_or(BACKGROUND_ID, |(o, _)| o.id)
+            })
+            .collect()
+    }
+
+    /// Places every solid and shadow for a scene.
+    fn prepare<'a>(&self, scene: &'a Scene) -> Frame<'a> {
+        let world_from_camera = scene.world_from_camera();
+        let world = &scene.world;
+        let sun = Vector3::from(world.environment.sun_direction);
+        let mut objects = Vec::new();
+        let mut shadows = Vec::new();
+        let camera_from_world = world_from_camera.inverse();
+        let mut add_shadow = |pose: &Isometry3<f64>, points: Vec<Point3<f64>>| {
+            if let Some(vertices) = shadow_hull(pose, &points, &sun) {
+                let in_camera = vertices
+                    .iter()
+                    .map(|v| camera_from_world * Point3::new(v.x, v.y, 0.0));
+                if let Some(rect) = self.fov.rect_of(&self.camera, in_camera) {
+                    shadows.push(ShadowPolygon { vertices, rect });
+                }
+            }
+        };
+        for (index, cone) in world.cones.iter().enumerate() {
+            let model = cone.model();
+            let solid = Solid::cone(&model);
+            let pose = cone.world_from_cone;
+            if let Some(placed) = Placed::new(
+                index as u32 + 1,
+                solid,
+                &pose,
+                &world_from_camera,
+                &self.camera,
+                &self.fov,
+            ) {
+                objects.push(placed);
+            }
+            let hw = model.plate_half_width_m;
+            let plate: Vec<Point3<f64>> = (0..8)
+                .map(|i| {
+                    let x = if i & 1 == 0 { -hw } else { hw };
+                    let y = if i & 2 == 0 { -hw } else { hw };
+                    Point3::new(
+                        x,
+                        y,
+                        if i & 4 == 0 {
+                            0.0
+                        } else {
+                            model.plate_height_m
+                        },
+                    )
+                })
+                .collect();
+            add_shadow(&pose, plate);
+            let top_r = model.keypoint_radii_m[3];
+            let body: Vec<Point3<f64>> = circle_points(model.keypoint_radii_m[0], 0.0, 16)
+                .chain(circle_points(top_r, model.body_height_m, 12))
+                .collect();
+            add_shadow(&pose, body);
+        }
+        let cone_count = world.cones.len() as u32;
+        for (index, distractor) in world.distractors.iter().enumerate() {
+            let id = cone_count + index as u32 + 1;
+            let pose = distractor.world_from_object;
+            let mut parts: Vec<Solid> = Vec::new();
+            match distractor.shape {
+                DistractorShape::Box { half_extents_m } => parts.push(Solid::Cuboid {
+                    half_m: half_extents_m,
+                }),
+                DistractorShape::Pole { radius_m, height_m } => parts.push(Solid::Cylinder {
+                    radius_m,
+                    z0_m: 0.0,
+                    z1_m: height_m,
+                }),
+                DistractorShape::TyreStack { radius_m, tyres } => parts.push(Solid::Cylinder {
+                    radius_m,
+                    z0_m: 0.0,
+                    z1_m: 0.2 * f64::from(tyres),
+                }),
+                DistractorShape::Person { height_m } => {
+                    let head = 0.11;
+                    parts.push(Solid::Cylinder {
+                        radius_m: 0.2,
+                        z0_m: 0.0,
+                        z1_m: height_m - 2.2 * head,
+                    });
+                    parts.push(Solid::Sphere {
+                        radius_m: head,
+                        z_m: height_m - head,
+                    });
+                }
+            }
+            for solid in parts {
+                if let Some(placed) = Placed::new(
+                    id,
+                    solid,
+                    &pose,
+                    &world_from_camera,
+                    &self.camera,
+                    &self.fov,
+                ) {
+                    objects.push(placed);
+                }
+                let points: Vec<Point3<f64>> = match solid {
+                    Solid::Cuboid { half_m } => (0..8)
+                        .map(|i| {
+                            Point3::new(
+                                if i & 1 == 0 { -half_m[0] } else { half_m[0] },
+                                if i & 2 == 0 { -half_m[1] } else { half_m[1] },
+                                if i & 4 == 0 { 0.0 } else { 2.0 * half_m[2] },
+                            )
+                        })
+                        .collect(),
+                    Solid::Cylinder {
+                        radius_m,
+                        z0_m,
+                        z1_m,
+                    } => circle_points(radius_m, z0_m, 12)
+                        .chain(circle_points(radius_m, z1_m, 12))
+                        .collect(),
+                    Solid::Sphere { radius_m, z_m } => circle_points(radius_m, z_m, 12).collect(),
+                    Solid::Cone { .. } => Vec::new(),
+                };
+                add_shadow(&pose, points);
+            }
+        }
+        Frame {
+            scene,
+            objects,
+            shadows,
+            world_from_camera: world_from_camera.rotation.to_rotation_matrix().into_inner(),
+            camera_centre: world_from_camera.translation.vector,
+            noise: NoiseTable::new(world.environment.texture_key),
+            cone_count,
+            fx: self.camera.fx_px,
+        }
+    }
+}
+
+impl Frame<'_> {
+    /// Nearest object hit along a camera-frame ray; counts unoccluded cone hits.
+    fn nearest<'p>(
+        &self,
+        ray_camera: &Vector3<f64>,
+        col: i64,
+        row: i64,
+        active: &[&'p Placed],
+        mut counts: Option<&mut Vec<(u32, u64)>>,
+    ) -> Option<(&'p Placed, raycast::Hit)> {
+        let d = self.world_from_camera * ray_camera;
+        let mut best: Option<(&Placed, raycast::Hit)> = None;
+        for object in active {
+            if !object.covers(col, row) {
+                continue;
+            }
+            if let Some(hit) = object.intersect(&d) {
+                if object.id <= self.cone_count {
+                    if let Some(counts) = counts.as_deref_mut() {
+                        match counts.iter_mut().find(|(id, _)| *id == object.id) {
+                            Some(entry) => entry.1 += 1,
+                            None => counts.push((object.id, 1)),
+                        }
+                    }
+                }
+                if best.as_ref().is_none_or(|(_, b)| hit.t < b.t) {
+                    best = Some((object, hit));
+                }
+            }
+        }
+        best
+    }
+
+    /// Colour and object id along a camera-frame ray.
+    fn cast(
+        &self,
+        ray_camera: &Vector3<f64>,
+        col: i64,
+        row: i64,
+        active: &[&Placed],
+        shadows: &[&ShadowPolygon],
+        counts: Option<&mut Vec<(u32, u64)>>,
+    ) -> ([f32; 3], u32) {
+        let env = &self.scene.world.environment;
+        let d = self.world_from_camera * ray_camera;
+        let view = d.normalize();
+        let ground_t = if d.z < -1e-12 {
+            -self.camera_centre.z / d.z
+        } else {
+            f64::INFINITY
+        };
+        let hit = self.nearest(ray_camera, col, row, active, counts);
+        if let Some((object, hit)) = hit.filter(|(_, h)| h.t < ground_t) {
+            let normal = object.world_from_local * hit.normal;
+            let colour = self.object_colour(object, &hit, &normal, &view);
+            return (light::haze(env, colour, hit.t * d.norm()), object.id);
+        }
+        if ground_t.is_finite() {
+            let p = self.camera_centre + d * ground_t;
+            let distance = ground_t * d.norm();
+            let footprint = (distance / self.fx / (-view.z).max(0.05)) as f32;
+            let albedo = materials::ground_albedo(env, &self.noise, p.x, p.y, footprint);
+            let point = Point2::new(p.x, p.y);
+            let mut lit = 1.0_f64;
+            for shadow in shadows {
+                if col >= shadow.rect[0] && col <= shadow.rect[2] {
+                    lit = lit.min(shadow.light_at(&point));
+                }
+            }
+            let colour = light::shade(env, albedo, &Vector3::z(), &view, lit as f32, 0.0);
+            return (light::haze(env, colour, distance), BACKGROUND_ID);
+        }
+        (light::sky(env, &self.noise, &view), BACKGROUND_ID)
+    }
+
+    /// Shaded colour of an object hit.
+    fn object_colour(
+        &self,
+        object: &Placed,
+        hit: &raycast::Hit,
+        normal: &Vector3<f64>,
+        view: &Vector3<f64>,
+    ) -> [f32; 3] {
+        let env = &self.scene.world.environment;
+        let world = &self.scene.world;
+        if object.id <= self.cone_count {
+            let Some(cone) = world.cones.get(object.id as usize - 1) else {
+                return [1.0, 0.0, 1.0];
+            };
+            let model = cone.model();
+            let azimuth = hit.point.y.atan2(hit.point.x);
+            let albedo = materials::cone_albedo(
+                cone.class,
+                &model,
+                &cone.appearance,
+                &self.noise,
+                hit.point.z,
+                azimuth,
+                hit.part == Part::Plate,
+            );
+            return light::shade(env, albedo, normal, view, 1.0, 0.35);
+        }
+        let Some(distractor) = world
+            .distractors
+            .get((object.id - self.cone_count - 1) as usize)
+        else {
+            return [1.0, 0.0, 1.0];
+        };
+        let mut albedo = distractor.albedo;
+        match distractor.shape {
+            DistractorShape::TyreStack { .. } => {
+                let seam = (hit.point.z / 0.2).fract();
+                if !(0.1..0.9).contains(&seam) {
+                    albedo = albedo.map(|c| c * 0.4);
+                }
+            }
+            DistractorShape::Person { .. } if hit.part == Part::Head => albedo = [0.35, 0.2, 0.13],
+            DistractorShape::Person { .. } if hit.point.z < 0.8 => albedo = [0.03, 0.03, 0.05],
+            _ => {}
+        }
+        let grain = 0.85
+            + 0.3
+                * self.noise.value(
+                    hit.point.x as f32 * 20.0 + 11.0,
+                    (hit.point.z + hit.point.y) as f32 * 20.0,
+                );
+        albedo = albedo.map(|c| c * grain);
+        light::shade(env, albedo, normal, view, 1.0, 0.1)
+    }
+}

@@ -1,0 +1,205 @@
+//! Camera effects on the linear radiance buffer, then tone mapping to 8-bit sRGB: exposure,
+//! vignetting, defocus (box blur), motion blur (directional), sensor noise (shot + read, from a
+//! per-pixel hash so it is thread-independent), and JPEG artefacts (encode/decode round trip).
+
+use image::{RgbImage, codecs::jpeg::JpegEncoder};
+use rayon::prelude::*;
+
+use crate::{error::SimError, rng::hash_unit, scene::CameraEffects};
+
+/// Linear -> display curve strength (`1 - exp(-k x)`).
+const TONE_K: f32 = 1.25;
+/// Entries of the display -> sRGB byte table.
+const LUT_SIZE: usize = 4096;
+
+/// Applies the effects to `linear` (row-major, `width` x `height`) and returns the 8-bit image.
+pub fn finish(
+    linear: &mut [[f32; 3]],
+    width: u32,
+    height: u32,
+    effects: &CameraEffects,
+) -> Result<RgbImage, SimError> {
+    let (w, h) = (width as usize, height as usize);
+    if effects.defocus_px >= 0.5 {
+        let radius = effects.defocus_px.round() as usize;
+        box_blur(linear, w, h, radius, true);
+        box_blur(linear, w, h, radius, false);
+    }
+    if effects.motion_blur_px >= 1.0 {
+        motion_blur(
+            linear,
+            w,
+            h,
+            effects.motion_blur_px,
+            effects.motion_blur_angle_rad,
+        );
+    }
+    let lut = srgb_lut();
+    let (cx, cy) = (0.5 * w as f32, 0.5 * h as f32);
+    let inv_r2 = 1.0 / (cx * cx + cy * cy);
+    let mut bytes = vec![0_u8; w * h * 3];
+    bytes
+        .par_chunks_mut(w * 3)
+        .enumerate()
+        .for_each(|(row, out)| {
+            let dy = row as f32 + 0.5 - cy;
+            for col in 0..w {
+                let dx = col as f32 + 0.5 - cx;
+                let vignette = 1.0 - effects.vignetting * (dx * dx + dy * dy) * inv_r2;
+                let pixel = linear[row * w + col];
+                for c in 0..3 {
+                    let mut display =
+                        1.0 - (-TONE_K * pixel[c] * effects.exposure * vignette).exp();
+                    if effects.read_noise > 0.0 || effects.shot_noise_gain > 0.0 {
+                        let sigma = (effects.read_noise * effects.read_noise
+                            + effects.shot_noise_gain * display.max(0.0))
+                        .sqrt();
+                        let index = ((row * w + col) * 3 + c) as u64;
+                        let g = hash_unit(effects.noise_key, index, 1)
+                            + hash_unit(effects.noise_key, index, 2)
+                            + hash_unit(effects.noise_key, index, 3)
+                            - 1.5;
+                        display += sigma * 2.0 * g;
+                    }
+                    let i = (display.clamp(0.0, 1.0) * (LUT_SIZE - 1) as f32) as usize;
+                    out[col * 3 + c] = lut[i];
+                }
+            }
+        });
+    let mut image = RgbImage::from_raw(width, height, bytes).ok_or(SimError::Internal {
+        what: "image buffer size",
+    })?;
+    if let Some(quality) = effects.jpeg_quality {
+        image = jpeg_round_trip(&image, quality)?;
+    }
+    Ok(image)
+}
+
+/// Display value -> sRGB byte.
+fn srgb_lut() -> Vec<u8> {
+    (0..LUT_SIZE)
+        .map(|i| {
+            let v = i as f32 / (LUT_SIZE - 1) as f32;
+            let s = if v <= 0.003_130_8 {
+                12.92 * v
+            } else {
+                1.055 * v.powf(1.0 / 2.4) - 0.055
+            };
+            (s * 255.0).round().clamp(0.0, 255.0) as u8
+        })
+        .collect()
+}
+
+/// Encodes as JPEG at `quality` and decodes again.
+pub fn jpeg_round_trip(image: &RgbImage, quality: u8) -> Result<RgbImage, SimError> {
+    let mut buffer = Vec::new();
+    JpegEncoder::new_with_quality(&mut buffer, quality.clamp(1, 100))
+        .encode_image(image)
+        .map_err(|source| SimError::Image {
+            what: "JPEG encode".into(),
+            source,
+        })?;
+    let decoded = image::load_from_memory_with_format(&buffer, image::ImageFormat::Jpeg).map_err(
+        |source| SimError::Image {
+            what: "JPEG decode".into(),
+            source,
+        },
+    )?;
+    Ok(decoded.to_rgb8())
+}
+
+/// Separable box blur of `radius` pixels, horizontal or vertical.
+fn box_blur(buffer: &mut [[f32; 3]], w: usize, h: usize, radius: usize, horizontal: bool) {
+    if radius == 0 {
+        return;
+    }
+    let source = buffer.to_vec();
+    let (lines, len) = if horizontal { (h, w) } else { (w, h) };
+    let at = |line: usize, i: usize| {
+        if horizontal {
+            line * w + i
+        } else {
+            i * w + line
+        }
+    };
+    let out: Vec<Vec<[f32; 3]>> = (0..lines)
+        .into_par_iter()
+        .map(|line| {
+            let mut result = vec![[0.0_f32; 3]; len];
+            for (i, value) in result.iter_mut().enumerate() {
+                let lo = i.saturating_sub(radius);
+                let hi = (i + radius).min(len - 1);
+                let mut sum = [0.0_f32; 3];
+                for j in lo..=hi {
+                    let p = source[at(line, j)];
+                    sum = [sum[0] + p[0], sum[1] + p[1], sum[2] + p[2]];
+                }
+                let n = (hi - lo + 1) as f32;
+                *value = sum.map(|s| s / n);
+            }
+            result
+        })
+        .collect();
+    for (line, values) in out.into_iter().enumerate() {
+        for (i, v) in values.into_iter().enumerate() {
+            buffer[at(line, i)] = v;
+        }
+    }
+}
+
+/// Directional blur: the mean of taps along a segment of `length_px` at `angle_rad`.
+fn motion_blur(buffer: &mut [[f32; 3]], w: usize, h: usize, length_px: f32, angle_rad: f32) {
+    let taps = length_px.ceil() as i64 + 1;
+    let (dx, dy) = (angle_rad.cos(), angle_rad.sin());
+    let offsets: Vec<(i64, i64)> = (0..taps)
+        .map(|k| {
+            let s = (k as f32 / (taps - 1) as f32 - 0.5) * length_px;
+            ((s * dx).round() as i64, (s * dy).round() as i64)
+        })
+        .collect();
+    let source = buffer.to_vec();
+    buffer.par_chunks_mut(w).enumerate().for_each(|(row, out)| {
+        for (col, value) in out.iter_mut().enumerate() {
+            let mut sum = [0.0_f32; 3];
+            for (ox, oy) in &offsets {
+                let x = (col as i64 + ox).clamp(0, w as i64 - 1) as usize;
+                let y = (row as i64 + oy).clamp(0, h as i64 - 1) as usize;
+                let p = source[y * w + x];
+                sum = [sum[0] + p[0], sum[1] + p[1], sum[2] + p[2]];
+            }
+            *value = sum.map(|s| s / offsets.len() as f32);
+        }
+    });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn exposure_brightens_and_noise_is_deterministic() {
+        let mut a = vec![[0.2_f32; 3]; 16 * 8];
+        let mut b = a.clone();
+        let dark = finish(&mut a, 16, 8, &CameraEffects::none()).unwrap();
+        let bright = finish(
+            &mut b,
+            16,
+            8,
+            &CameraEffects {
+                exposure: 3.0,
+                ..CameraEffects::none()
+            },
+        )
+        .unwrap();
+        assert!(bright.get_pixel(3, 3).0[0] > dark.get_pixel(3, 3).0[0]);
+        let noisy = CameraEffects {
+            read_noise: 0.02,
+            noise_key: 9,
+            jpeg_quality: Some(60),
+            ..CameraEffects::none()
+        };
+        let x = finish(&mut vec![[0.2_f32; 3]; 16 * 8], 16, 8, &noisy).unwrap();
+        let y = finish(&mut vec![[0.2_f32; 3]; 16 * 8], 16, 8, &noisy).unwrap();
+        assert_eq!(x, y);
+    }
+}
