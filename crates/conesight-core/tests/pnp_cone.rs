@@ -6,7 +6,9 @@
 use conesight_core::GeometryError;
 use conesight_core::camera::{Camera, Distortion, Extrinsics};
 use conesight_core::cone::{ConeModel, KEYPOINT_COUNT, silhouette_keypoints};
-use conesight_core::pnp::{ConeObservation, ConePnpParams, ConeSolver, solve_cone};
+use conesight_core::pnp::{
+    ConeObservation, ConePnpParams, ConeSolver, predicted_keypoints, solve_cone,
+};
 use nalgebra::{Isometry3, Matrix3, Point2, Point3, Translation3, UnitQuaternion, Vector3};
 use proptest::prelude::*;
 use rand::{Rng, SeedableRng};
@@ -257,4 +259,21 @@ fn covariance_matches_the_empirical_spread_far() {
 #[test]
 fn covariance_on_the_ground_plane_matches_the_empirical_spread() {
     covariance_check(12.0, 2.0, true, 3);
+}
+
+#[test]
+fn predicted_keypoints_reproduce_the_input_and_range_is_the_distance() {
+    let camera = distorted_camera();
+    let model = ConeModel::large();
+    let extrinsics = Extrinsics::from_height_pitch(0.8, -0.05);
+    let pose = camera_from_cone(&extrinsics, 7.0, -1.2, 2.5);
+    let keypoints = silhouette_keypoints(&camera, &model, &pose).unwrap();
+    let params = ConePnpParams::default().with_extrinsics(&extrinsics, false);
+    let estimate = solve_cone(&camera, &model, &ConeObservation::new(keypoints), &params).unwrap();
+    let predicted = predicted_keypoints(&camera, &model, &estimate).unwrap();
+    for (p, k) in predicted.iter().zip(&keypoints) {
+        assert!((p - k).norm() < 1e-6, "{p} vs {k}");
+    }
+    let truth_m = pose.translation.vector.norm();
+    assert!((estimate.range_m() - truth_m).abs() < 1e-9);
 }

@@ -19,14 +19,13 @@
 //!    search over the 7 subsets picks the best; then least squares on the inliers.
 //! 5. Covariance `(J^T W J)^-1 sigma^2` at the least squares solution.
 
-use nalgebra::{
-    Matrix3, Matrix5, Point2, Point3, Rotation3, SMatrix, UnitQuaternion, Vector2, Vector3, Vector5,
-};
+use nalgebra::{Matrix3, Point2, Point3, Rotation3, UnitQuaternion, Vector2, Vector3};
 
+use super::cone_gauss_newton::{Fit, Linearisation, Measurements, Mode, State};
 use super::cone_init::initial_position;
 use super::params::{ConeEstimate, ConeObservation, ConePnpParams};
 use super::robust::RobustLoss;
-use super::silhouette_jacobian::{SilhouetteFrame, SilhouetteModel};
+use super::silhouette_jacobian::SilhouetteModel;
 use crate::camera::Camera;
 use crate::cone::{ConeModel, KEYPOINT_COUNT};
 use crate::error::GeometryError;
@@ -39,81 +38,16 @@ const FINAL_RELATIVE_TOLERANCE: f64 = 1e-6;
 /// The least squares fast path is accepted when every residual is below this fraction of the
 /// outlier threshold (3 sigma by default); otherwise the robust stages run.
 const FAST_PATH_THRESHOLD_FRACTION: f64 = 0.5;
-/// Step halvings tried before a Gauss-Newton stage gives up improving.
-const MAX_STEP_HALVINGS: usize = 8;
-
-/// 2x5 Jacobian of a keypoint residual w.r.t. `[c_x, c_y, c_z, tilt_a, tilt_b]`.
-type Jacobian = SMatrix<f64, 2, 5>;
-
-/// Which unknowns are free.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Mode {
-    /// Camera centre `c` (3).
-    Free,
-    /// `c_x, c_y` with `c_z` the camera height over the ground plane (2).
-    Ground,
-    /// `c` and the axis tilt (5).
-    Tilt,
-}
-
-impl Mode {
-    /// Number of free parameters; they come first in `[c_x, c_y, c_z, tilt_a, tilt_b]`.
-    fn dimension(self) -> usize {
-        match self {
-            Self::Free => 3,
-            Self::Ground => 2,
-            Self::Tilt => 5,
-        }
-    }
-
-    /// Whether parameter `i` of `[c_x, c_y, c_z, tilt_a, tilt_b]` is free.
-    fn active(self, i: usize) -> bool {
-        i < self.dimension()
-    }
-}
-
-/// The unknowns.
-#[derive(Debug, Clone, Copy)]
-struct State {
-    /// Camera centre in the cone frame.
-    centre_in_cone: Point3<f64>,
-    /// Axis tilt: rotation vector components along the prior frame's x and y axes.
-    tilt: Vector2<f64>,
-    /// `camera_from_cone` rotation for this tilt.
-    rotation: Rotation3<f64>,
-}
-
-/// Residuals and Jacobians at a state.
-#[derive(Clone, Copy)]
-struct Linearisation {
-    residuals: [Vector2<f64>; KEYPOINT_COUNT],
-    jacobians: [Jacobian; KEYPOINT_COUNT],
-}
-
-/// A state with its linearisation.
-#[derive(Clone, Copy)]
-struct Fit {
-    state: State,
-    lin: Linearisation,
-}
 
 /// A cone solver for one camera, cone model and parameter set; reuse it across cones.
 #[derive(Debug, Clone)]
 pub struct ConeSolver {
-    camera: Camera,
-    model: SilhouetteModel,
-    params: ConePnpParams,
-    mode: Mode,
+    pub(super) camera: Camera,
+    pub(super) model: SilhouetteModel,
+    pub(super) params: ConePnpParams,
+    pub(super) mode: Mode,
     /// `camera_from_cone` rotation of an untilted cone (yaw chosen arbitrarily).
-    prior_rotation: Rotation3<f64>,
-}
-
-/// The measurements, undistorted and whitened.
-struct Measurements {
-    normalized: [Vector2<f64>; KEYPOINT_COUNT],
-    /// Maps a normalised-coordinate error to (first order) pixels: `F * J_distort`.
-    whitening: [nalgebra::Matrix2<f64>; KEYPOINT_COUNT],
-    weights: [f64; KEYPOINT_COUNT],
+    pub(super) prior_rotation: Rotation3<f64>,
 }
 
 impl ConeSolver {
@@ -302,197 +236,6 @@ impl ConeSolver {
             tilt: Vector2::zeros(),
             rotation: self.prior_rotation,
         }
-    }
-
-    /// Residuals (pixels, first order) and Jacobians at `state`.
-    fn linearise(
-        &self,
-        state: &State,
-        measurements: &Measurements,
-    ) -> Result<Linearisation, GeometryError> {
-        let frame = SilhouetteFrame::new(&self.model, &state.centre_in_cone)?;
-        let rotation = state.rotation.matrix();
-        let tilt_axes = [
-            self.prior_rotation * Vector3::x(),
-            self.prior_rotation * Vector3::y(),
-        ];
-        let mut residuals = [Vector2::zeros(); KEYPOINT_COUNT];
-        let mut jacobians = [Jacobian::zeros(); KEYPOINT_COUNT];
-        for k in 0..KEYPOINT_COUNT {
-            let point_in_cone = frame.point(&self.model, k);
-            let point_in_camera = rotation * (point_in_cone - state.centre_in_cone);
-            let z = point_in_camera.z;
-            if z.is_nan() || z <= 1e-9 {
-                return Err(GeometryError::BehindCamera { z_m: z });
-            }
-            let inv_z = 1.0 / z;
-            let (x_n, y_n) = (point_in_camera.x * inv_z, point_in_camera.y * inv_z);
-            let whitening = &measurements.whitening[k];
-            residuals[k] = whitening * (Vector2::new(x_n, y_n) - measurements.normalized[k]);
-            // d(residual)/d(point_in_camera) = W * [[1/z, 0, -x/z^2], [0, 1/z, -y/z^2]].
-            let d_projection =
-                nalgebra::Matrix2x3::new(inv_z, 0.0, -x_n * inv_z, 0.0, inv_z, -y_n * inv_z);
-            let d_camera = whitening * d_projection;
-            // d(point_in_camera)/d(centre) = R (dP/dc - I).
-            let d_cone = d_camera * rotation;
-            let mut d_centre = -d_cone;
-            let side = self.model.sides[k];
-            if side != 0.0 {
-                let jac = &frame.jacobians[usize::from(side > 0.0)];
-                let radius = self.model.radii_m[k];
-                // Only the x, y rows of dP/dc are non-zero.
-                d_centre += d_cone.fixed_columns::<2>(0) * jac * radius;
-            }
-            jacobians[k].fixed_columns_mut::<3>(0).copy_from(&d_centre);
-            if self.mode == Mode::Tilt {
-                for (i, axis) in tilt_axes.iter().enumerate() {
-                    jacobians[k]
-                        .column_mut(3 + i)
-                        .copy_from(&(d_camera * axis.cross(&point_in_camera)));
-                }
-            }
-        }
-        Ok(Linearisation {
-            residuals,
-            jacobians,
-        })
-    }
-
-    /// Robust cost over the used keypoints plus the tilt prior.
-    fn cost(
-        &self,
-        fit: &Fit,
-        measurements: &Measurements,
-        used: &[bool; KEYPOINT_COUNT],
-        loss: RobustLoss,
-    ) -> f64 {
-        let mut total = 0.0;
-        for ((residual, weight), keep) in fit
-            .lin
-            .residuals
-            .iter()
-            .zip(&measurements.weights)
-            .zip(used)
-        {
-            if *keep {
-                total += weight * loss.cost(residual.norm());
-            }
-        }
-        if self.mode == Mode::Tilt {
-            total += 0.5 * (fit.state.tilt / self.tilt_prior_scale()).norm_squared();
-        }
-        total
-    }
-
-    /// The tilt prior's scale in the cost's units (pixels / sigma_px).
-    fn tilt_prior_scale(&self) -> f64 {
-        self.params.tilt_prior_sigma_rad / self.params.keypoint_sigma_px
-    }
-
-    /// Applies a parameter step.
-    fn apply(&self, state: &State, step: &Vector5<f64>) -> State {
-        let mut next = *state;
-        next.centre_in_cone += Vector3::new(step[0], step[1], step[2]);
-        if self.mode == Mode::Tilt {
-            next.tilt += Vector2::new(step[3], step[4]);
-            let axis_in_camera = self.prior_rotation * Vector3::new(next.tilt.x, next.tilt.y, 0.0);
-            next.rotation = UnitQuaternion::from_scaled_axis(axis_in_camera).to_rotation_matrix()
-                * self.prior_rotation;
-        }
-        next
-    }
-
-    /// Gauss-Newton / IRLS over the `used` keypoints with step halving. Returns the final
-    /// fit and the iterations run.
-    fn gauss_newton(
-        &self,
-        start: Fit,
-        measurements: &Measurements,
-        used: &[bool; KEYPOINT_COUNT],
-        loss: RobustLoss,
-        relative_tolerance: f64,
-    ) -> Result<(Fit, usize), GeometryError> {
-        let mut fit = start;
-        let mut cost = self.cost(&fit, measurements, used, loss);
-        let mut iterations = 0;
-        while iterations < self.params.max_iterations {
-            iterations += 1;
-            let weights: [f64; KEYPOINT_COUNT] = std::array::from_fn(|k| {
-                if used[k] {
-                    measurements.weights[k] * loss.weight(fit.lin.residuals[k].norm())
-                } else {
-                    0.0
-                }
-            });
-            let (mut hessian, mut gradient) = self.normal_equations(&fit.lin, &weights);
-            if self.mode == Mode::Tilt {
-                let prior = 1.0 / self.tilt_prior_scale().powi(2);
-                for i in 0..2 {
-                    hessian[(3 + i, 3 + i)] += prior;
-                    gradient[3 + i] += prior * fit.state.tilt[i];
-                }
-            }
-            let Some(cholesky) = hessian.cholesky() else {
-                return Err(GeometryError::SolverFailed {
-                    reason: "cone normal equations are singular (keypoints degenerate)",
-                });
-            };
-            let step = -cholesky.solve(&gradient);
-            let mut scale = 1.0;
-            let mut accepted = false;
-            for _ in 0..MAX_STEP_HALVINGS {
-                let state = self.apply(&fit.state, &(step * scale));
-                if let Ok(lin) = self.linearise(&state, measurements) {
-                    let candidate = Fit { state, lin };
-                    let candidate_cost = self.cost(&candidate, measurements, used, loss);
-                    if candidate_cost <= cost * (1.0 + 1e-12) + 1e-300 {
-                        fit = candidate;
-                        cost = candidate_cost;
-                        accepted = true;
-                        break;
-                    }
-                }
-                scale *= 0.5;
-            }
-            let distance = fit.state.centre_in_cone.coords.norm();
-            if !accepted || step.norm() * scale <= relative_tolerance * distance {
-                break;
-            }
-        }
-        Ok((fit, iterations))
-    }
-
-    /// `J^T W J` and `J^T W r` with inactive parameters pinned (unit diagonal, zero gradient).
-    /// The free parameters are always the first `dimension` ones.
-    fn normal_equations(
-        &self,
-        lin: &Linearisation,
-        weights: &[f64; KEYPOINT_COUNT],
-    ) -> (Matrix5<f64>, Vector5<f64>) {
-        let dimension = self.mode.dimension();
-        let mut hessian = Matrix5::identity();
-        let mut gradient = Vector5::zeros();
-        for i in 0..dimension {
-            hessian[(i, i)] = 0.0;
-        }
-        for ((jacobian, residual), w) in lin.jacobians.iter().zip(&lin.residuals).zip(weights) {
-            if *w == 0.0 {
-                continue;
-            }
-            for i in 0..dimension {
-                let (a0, a1) = (jacobian[(0, i)] * w, jacobian[(1, i)] * w);
-                gradient[i] += a0 * residual.x + a1 * residual.y;
-                for j in i..dimension {
-                    hessian[(i, j)] += a0 * jacobian[(0, j)] + a1 * jacobian[(1, j)];
-                }
-            }
-        }
-        for i in 0..dimension {
-            for j in 0..i {
-                hessian[(i, j)] = hessian[(j, i)];
-            }
-        }
-        (hessian, gradient)
     }
 
     /// Used keypoints whose residual is within the outlier threshold.
