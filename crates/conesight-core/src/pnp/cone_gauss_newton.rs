@@ -247,29 +247,44 @@ impl ConeSolver {
         lin: &Linearisation,
         weights: &[f64; KEYPOINT_COUNT],
     ) -> (Matrix5<f64>, Vector5<f64>) {
-        let dimension = self.mode.dimension();
-        let mut hessian = Matrix5::identity();
-        let mut gradient = Vector5::zeros();
-        for i in 0..dimension {
-            hessian[(i, i)] = 0.0;
+        match self.mode {
+            Mode::Ground => accumulate::<2>(lin, weights),
+            Mode::Free => accumulate::<3>(lin, weights),
+            Mode::Tilt => accumulate::<5>(lin, weights),
         }
-        for ((jacobian, residual), w) in lin.jacobians.iter().zip(&lin.residuals).zip(weights) {
-            if *w == 0.0 {
-                continue;
-            }
-            for i in 0..dimension {
-                let (a0, a1) = (jacobian[(0, i)] * w, jacobian[(1, i)] * w);
-                gradient[i] += a0 * residual.x + a1 * residual.y;
-                for j in i..dimension {
-                    hessian[(i, j)] += a0 * jacobian[(0, j)] + a1 * jacobian[(1, j)];
-                }
-            }
-        }
-        for i in 0..dimension {
-            for j in 0..i {
-                hessian[(i, j)] = hessian[(j, i)];
-            }
-        }
-        (hessian, gradient)
     }
+}
+
+/// The normal equations over the first `N` parameters (fixed size, so the loops unroll);
+/// the others are pinned to the identity.
+fn accumulate<const N: usize>(
+    lin: &Linearisation,
+    weights: &[f64; KEYPOINT_COUNT],
+) -> (Matrix5<f64>, Vector5<f64>) {
+    let mut hessian = [[0.0_f64; N]; N];
+    let mut gradient = [0.0_f64; N];
+    for ((jacobian, residual), w) in lin.jacobians.iter().zip(&lin.residuals).zip(weights) {
+        if *w == 0.0 {
+            continue;
+        }
+        let row0: [f64; N] = std::array::from_fn(|i| jacobian[(0, i)]);
+        let row1: [f64; N] = std::array::from_fn(|i| jacobian[(1, i)]);
+        for i in 0..N {
+            let (a0, a1) = (row0[i] * w, row1[i] * w);
+            gradient[i] += a0 * residual.x + a1 * residual.y;
+            for j in i..N {
+                hessian[i][j] += a0 * row0[j] + a1 * row1[j];
+            }
+        }
+    }
+    let mut full_hessian = Matrix5::identity();
+    let mut full_gradient = Vector5::zeros();
+    for i in 0..N {
+        full_gradient[i] = gradient[i];
+        for j in i..N {
+            full_hessian[(i, j)] = hessian[i][j];
+            full_hessian[(j, i)] = hessian[i][j];
+        }
+    }
+    (full_hessian, full_gradient)
 }
