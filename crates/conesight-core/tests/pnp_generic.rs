@@ -8,7 +8,8 @@ use conesight_core::GeometryError;
 use conesight_core::camera::{Camera, Distortion, Extrinsics};
 use conesight_core::cone::{ConeModel, silhouette_keypoints, silhouette_points_in_cone};
 use conesight_core::pnp::{
-    ConeObservation, ConePnpParams, RansacParams, epnp, solve_cone, solve_pnp, solve_pnp_ransac,
+    ConeObservation, ConePnpParams, LmParams, RansacParams, epnp, refine_pose, solve_cone,
+    solve_pnp, solve_pnp_ransac,
 };
 use nalgebra::{Isometry3, Point2, Point3, Translation3, UnitQuaternion, Vector2, Vector3};
 use rand::{Rng, SeedableRng};
@@ -174,7 +175,22 @@ fn bad_input_is_a_clear_error() {
         solve_pnp(&camera, &object, &image),
         Err(GeometryError::TooFewPoints { needed: 5, got: 4 })
     ));
-    let (_, object, image) = random_scene(&mut rng, 10, false);
+    let (truth, object, image) = random_scene(&mut rng, 10, false);
+    assert!(matches!(
+        refine_pose(
+            &camera,
+            &object,
+            &image,
+            &[true; 9],
+            &truth,
+            &LmParams::default()
+        ),
+        Err(GeometryError::LengthMismatch {
+            left: 10,
+            right: 9,
+            ..
+        })
+    ));
     let params = RansacParams {
         inlier_threshold_px: f64::NAN,
         ..RansacParams::default()

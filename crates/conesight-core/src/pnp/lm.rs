@@ -71,6 +71,18 @@ pub fn refine_pose(
     initial: &Isometry3<f64>,
     params: &LmParams,
 ) -> Result<RefinedPose, GeometryError> {
+    for (what, len) in [
+        ("object_points vs image_points_px", image_points_px.len()),
+        ("object_points vs used", used.len()),
+    ] {
+        if object_points.len() != len {
+            return Err(GeometryError::LengthMismatch {
+                what,
+                left: object_points.len(),
+                right: len,
+            });
+        }
+    }
     let count = used.iter().filter(|u| **u).count();
     if count < 3 {
         return Err(GeometryError::TooFewPoints {
