@@ -27,4 +27,8 @@ def patches_to_tensor(patches_rgb: np.ndarray) -> torch.Tensor:
     """N x H x W x 3 uint8 patches -> float32 tensor [N, 3, H, W] with raw 0..255 values."""
     if patches_rgb.ndim != 4 or patches_rgb.shape[3] != 3:
         raise ValueError(f"expected NxHxWx3 RGB patches, got shape {patches_rgb.shape}")
-    return torch.from_numpy(np.ascontiguousarray(patches_rgb)).permute(0, 3, 1, 2).float()
+    # .contiguous(): a permuted uint8 tensor stays channels-last through .float(), and oneDNN's
+    # channels-last convolution backward crashes (segfault, torch 2.15 CPU) on narrow layers.
+    return (
+        torch.from_numpy(np.ascontiguousarray(patches_rgb)).permute(0, 3, 1, 2).float().contiguous()
+    )

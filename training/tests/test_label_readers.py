@@ -83,7 +83,8 @@ REKTNET_HEADER = ",Name,URL,top,mid_L_top,mid_R_top,mid_L_bot,mid_R_bot,bot_L,bo
 
 def test_rektnet_csv_maps_columns_to_conesight_order(tmp_path):
     path = tmp_path / "labels.csv"
-    row = '0,c1.jpg,http://x/c1.jpg,"[10, 1]","[8, 5]","[12, 5]","[7, 9]","[13, 9]","[5, 15]","[15, 15]"\n'
+    cells = '"[10, 1]","[8, 5]","[12, 5]","[7, 9]","[13, 9]","[5, 15]","[15, 15]"'
+    row = f"0,c1.jpg,http://x/c1.jpg,{cells}\n"
     path.write_text(REKTNET_HEADER + row)
     rows = read_rektnet_csv(path)
     assert rows[0].image == "c1.jpg" and rows[0].line == 2
@@ -107,7 +108,7 @@ def test_rektnet_malformed_cell_names_file_and_line(tmp_path, cell, message):
 
 def test_rektnet_missing_column_is_an_error(tmp_path):
     path = tmp_path / "labels.csv"
-    path.write_text("Name,top,mid_L_top\nc.jpg,\"[1, 2]\",\"[3, 4]\"\n")
+    path.write_text('Name,top,mid_L_top\nc.jpg,"[1, 2]","[3, 4]"\n')
     with pytest.raises(LabelError, match=r"labels\.csv:1: header lacks"):
         read_rektnet_csv(path)
 
