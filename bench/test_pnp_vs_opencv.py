@@ -2,7 +2,13 @@
 
 from __future__ import annotations
 
+import sys
+from pathlib import Path
+
 import numpy as np
+
+# The script is not a package; make it importable under any pytest import mode.
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 import pnp_vs_opencv as bench
 
 
