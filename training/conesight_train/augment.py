@@ -1,0 +1,166 @@
+"""Augmentation aimed at real photographs, on top of the renderer's own variety.
+
+Geometric (patch level, keypoints follow): scale and shift standing in for detector box jitter,
+horizontal mirror (left/right keypoints swap), truncation (a band at one side replaced by the
+crop rule's fill, as when a cone leaves the image), a neighbouring cone pasted at a side.
+Photometric: per-channel colour gain and offset, gamma, Gaussian or motion blur, sensor noise,
+JPEG re-compression. Every draw comes from the Generator passed in, so results are seeded.
+
+Box jitter done here re-samples the patch, so context outside it is replicated from the
+border; jittering the box in the full image at render time is better where available.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from conesight_train.data.patches import KeypointPatch, PatchSource
+from conesight_train.keypoints import MIRROR_PERMUTATION
+
+
+@dataclass(frozen=True)
+class AugmentParams:
+    """Probabilities and ranges of each augmentation (defaults: the training configuration)."""
+
+    scale_range: tuple[float, float] = (0.9, 1.1)
+    shift_fraction: float = 0.06  # of the patch side, each axis
+    p_geometric: float = 0.8
+    p_mirror: float = 0.5
+    p_truncate: float = 0.05
+    truncate_max_fraction: float = 0.25  # of the patch side
+    p_neighbour: float = 0.1
+    p_colour: float = 0.8
+    colour_gain_range: tuple[float, float] = (0.8, 1.2)
+    colour_offset_max: float = 20.0
+    p_gamma: float = 0.5
+    gamma_range: tuple[float, float] = (0.7, 1.4)
+    p_blur: float = 0.4
+    blur_sigma_max_px: float = 1.2
+    motion_blur_max_px: int = 5
+    p_noise: float = 0.5
+    noise_sigma_max: float = 8.0
+    p_jpeg: float = 0.4
+    jpeg_quality_range: tuple[int, int] = (30, 95)
+
+
+def _geometric(
+    patch: np.ndarray, keypoints: np.ndarray, rng: np.random.Generator, p: AugmentParams
+) -> tuple[np.ndarray, np.ndarray]:
+    n = patch.shape[0]
+    scale = rng.uniform(*p.scale_range)
+    shift = rng.uniform(-p.shift_fraction, p.shift_fraction, size=2) * n
+    centre = (n - 1) / 2.0
+    matrix = np.array(
+        [
+            [scale, 0.0, centre - scale * centre + shift[0]],
+            [0.0, scale, centre - scale * centre + shift[1]],
+        ]
+    )
+    out = cv2.warpAffine(
+        patch, matrix, (n, n), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE
+    )
+    moved = keypoints * scale + matrix[:, 2]
+    return out, moved
+
+
+def _mirror(patch: np.ndarray, keypoints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    n = patch.shape[1]
+    flipped = keypoints[list(MIRROR_PERMUTATION)].copy()
+    flipped[:, 0] = (n - 1) - flipped[:, 0]
+    return np.ascontiguousarray(patch[:, ::-1]), flipped
+
+
+def _truncate(patch: np.ndarray, rng: np.random.Generator, p: AugmentParams) -> np.ndarray:
+    n = patch.shape[0]
+    width = int(rng.integers(1, max(2, int(p.truncate_max_fraction * n))))
+    out = patch.copy()
+    side = int(rng.integers(4))
+    if side == 0:
+        out[:, :width] = 0
+    elif side == 1:
+        out[:, n - width :] = 0
+    elif side == 2:
+        out[:width] = 0
+    else:
+        out[n - width :] = 0
+    return out
+
+
+def _neighbour(patch: np.ndarray, other: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Pastes the central vertical strip of `other` (its cone) shrunk, at one side of `patch`."""
+    n = patch.shape[0]
+    scale = rng.uniform(0.5, 1.0)
+    size = max(2, int(n * scale))
+    small = cv2.resize(other, (size, size), interpolation=cv2.INTER_AREA)
+    strip_w = max(1, int(rng.uniform(0.12, 0.25) * n))
+    start = (size - strip_w) // 2 + int(rng.integers(-size // 8, size // 8 + 1))
+    start = int(np.clip(start, 0, size - strip_w))
+    strip = small[:, start : start + strip_w]
+    top = int(np.clip(n - size + rng.integers(-n // 10, n // 10 + 1), 0, n - size))
+    out = patch.copy()
+    if rng.random() < 0.5:
+        out[top : top + size, :strip_w] = strip
+    else:
+        out[top : top + size, n - strip_w :] = strip
+    return out
+
+
+def _photometric(image: np.ndarray, rng: np.random.Generator, p: AugmentParams) -> np.ndarray:
+    x = image.astype(np.float32)
+    if rng.random() < p.p_colour:
+        gain = rng.uniform(*p.colour_gain_range, size=3).astype(np.float32)
+        offset = rng.uniform(-p.colour_offset_max, p.colour_offset_max, size=3).astype(np.float32)
+        x = x * gain + offset
+    if rng.random() < p.p_gamma:
+        x = 255.0 * (np.clip(x, 0, 255) / 255.0) ** rng.uniform(*p.gamma_range)
+    if rng.random() < p.p_blur:
+        if rng.random() < 0.7:
+            x = cv2.GaussianBlur(x, (0, 0), rng.uniform(0.3, p.blur_sigma_max_px))
+        else:
+            length = int(rng.integers(2, p.motion_blur_max_px + 1))
+            kernel = np.zeros((length, length), np.float32)
+            kernel[length // 2, :] = 1.0 / length
+            rot = cv2.getRotationMatrix2D(
+                ((length - 1) / 2, (length - 1) / 2), rng.uniform(0, 180), 1.0
+            )
+            kernel = cv2.warpAffine(kernel, rot, (length, length))
+            kernel /= max(float(kernel.sum()), 1e-6)
+            x = cv2.filter2D(x, -1, kernel)
+    if rng.random() < p.p_noise:
+        x = x + rng.normal(0.0, rng.uniform(0.0, p.noise_sigma_max), size=x.shape)
+    out = np.clip(x + 0.5, 0, 255).astype(np.uint8)
+    if rng.random() < p.p_jpeg:
+        quality = int(rng.integers(p.jpeg_quality_range[0], p.jpeg_quality_range[1] + 1))
+        ok, encoded = cv2.imencode(".jpg", out[:, :, ::-1], [cv2.IMWRITE_JPEG_QUALITY, quality])
+        if ok:
+            out = np.ascontiguousarray(cv2.imdecode(encoded, cv2.IMREAD_COLOR)[:, :, ::-1])
+    return out
+
+
+class PhotoAugment:
+    """The augmenter used in training: `augment(sample, rng) -> sample` (module docs)."""
+
+    def __init__(
+        self, params: AugmentParams | None = None, neighbours: PatchSource | None = None
+    ) -> None:
+        self.params = params or AugmentParams()
+        self.neighbours = neighbours
+
+    def __call__(self, sample: KeypointPatch, rng: np.random.Generator) -> KeypointPatch:
+        p = self.params
+        patch = np.asarray(sample.patch_rgb)
+        keypoints = np.asarray(sample.keypoints_px, dtype=np.float64)
+        if rng.random() < p.p_geometric:
+            patch, keypoints = _geometric(patch, keypoints, rng, p)
+        if rng.random() < p.p_mirror:
+            patch, keypoints = _mirror(patch, keypoints)
+        if self.neighbours is not None and len(self.neighbours) and rng.random() < p.p_neighbour:
+            other = self.neighbours[int(rng.integers(len(self.neighbours)))].patch_rgb
+            patch = _neighbour(patch, np.asarray(other), rng)
+        if rng.random() < p.p_truncate:
+            patch = _truncate(patch, rng, p)
+        patch = _photometric(patch, rng, p)
+        return KeypointPatch(patch, keypoints.astype(np.float32))

@@ -1,0 +1,123 @@
+"""Keypoint errors of one or more networks, side by side (`conesight-eval-keypoints`).
+
+Each `--model LABEL=PATH` is a training checkpoint (`.pt`, run in PyTorch) or an exported
+`.onnx` file (run in ONNX Runtime, as deployed). Data sets:
+
+- `--synthetic SPEC`: held-out patches (a renderer folder or `toy:COUNT[:SEED]`);
+- `--real-crops DIR`: Supervisely keypoint crops (default `../shared/data/real-dev/
+  fsoco-keypoint-crops` when present). Each crop is taken as the detector box and cut by the crop
+  rule into an 80x80 patch; its keypoints map by the same rule, so errors are in 80x80 patch
+  pixels ("at 80x80 scale"). Crops without 7 points are skipped and counted.
+
+Prints, per data set, the mean / median / 90th percentile error and a per-keypoint table with
+one column per model, and writes everything to `--json`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch.utils.data import DataLoader
+from tqdm import tqdm
+
+from conesight_train.checkpoint import load_model_from_checkpoint
+from conesight_train.data.patches import KeypointDataset, PatchSource, RealCropPatches
+from conesight_train.data.supervisely_keypoints import read_keypoint_crops
+from conesight_train.export import INPUT_NAME, ort_session
+from conesight_train.keypoints import KEYPOINT_NAMES
+from conesight_train.metrics import KeypointErrors
+from conesight_train.train_keypoints import open_sources
+
+REPO_ROOT = Path(__file__).resolve().parents[2]
+DEFAULT_REAL_CROPS = REPO_ROOT.parent / "shared" / "data" / "real-dev" / "fsoco-keypoint-crops"
+
+Predictor = Callable[[np.ndarray], np.ndarray]  # float32 [N, 3, 80, 80] -> [N, 7, 2]
+
+
+def predictor_for(path: Path) -> Predictor:
+    """A batch predictor for a checkpoint (PyTorch) or an ONNX file (ONNX Runtime)."""
+    if path.suffix == ".onnx":
+        sess = ort_session(path)
+        return lambda x: sess.run(None, {INPUT_NAME: x})[0]
+    model, _, _ = load_model_from_checkpoint(path)
+
+    def run(x: np.ndarray) -> np.ndarray:
+        with torch.no_grad():
+            return model(torch.from_numpy(x)).keypoints_px.numpy()
+
+    return run
+
+
+def evaluate(predict: Predictor, source: PatchSource, batch_size: int = 256) -> KeypointErrors:
+    """Euclidean keypoint errors of `predict` over every patch of `source`."""
+    loader = DataLoader(KeypointDataset(source), batch_size=batch_size)
+    errors = []
+    for images, keypoints in tqdm(loader, desc="evaluate", leave=False):
+        predicted = predict(images.numpy())
+        errors.append(np.linalg.norm(predicted - keypoints.numpy(), axis=-1))
+    return KeypointErrors(np.concatenate(errors))
+
+
+def format_table(title: str, results: dict[str, KeypointErrors]) -> str:
+    """Side-by-side table: summary rows, then one row per keypoint (mean px)."""
+    labels = list(results)
+    lines = [title, f"{'':<16}" + "".join(f"{label:>14}" for label in labels)]
+    for key in ("mean_px", "median_px", "p90_px"):
+        values = [results[label].summary()[key] for label in labels]
+        lines.append(f"{key:<16}" + "".join(f"{v:>14.3f}" for v in values))
+    for index, name in enumerate(KEYPOINT_NAMES):
+        values = [float(results[label].errors_px[:, index].mean()) for label in labels]
+        lines.append(f"{name:<16}" + "".join(f"{v:>14.3f}" for v in values))
+    count = results[labels[0]].errors_px.shape[0]
+    lines.append(f"({count} patches; errors in 80x80 patch pixels)")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--model", action="append", required=True, help="LABEL=PATH (.pt/.onnx)")
+    parser.add_argument("--synthetic", action="append", default=[], help="held-out patches")
+    parser.add_argument("--real-crops", type=Path, help="Supervisely keypoint crop folder")
+    parser.add_argument("--no-real", action="store_true", help="skip the real crops")
+    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--json", type=Path, help="write the results here")
+    args = parser.parse_args(argv)
+    torch.set_num_threads(args.threads)
+
+    predictors = {}
+    for spec in args.model:
+        label, sep, path = spec.partition("=")
+        if not sep or not label or not path:
+            parser.error(f"--model expects LABEL=PATH, got {spec!r}")
+        predictors[label] = predictor_for(Path(path))
+
+    datasets: dict[str, PatchSource] = {}
+    report: dict[str, object] = {}
+    if args.synthetic:
+        datasets["synthetic"] = open_sources(args.synthetic)
+    real_dir = args.real_crops or DEFAULT_REAL_CROPS
+    if not args.no_real and real_dir.is_dir():
+        crop_set = read_keypoint_crops(real_dir)
+        datasets["real_crops"] = RealCropPatches(crop_set.crops)
+        report["real_crops_skipped_not_7_points"] = len(crop_set.skipped_point_count)
+    elif not args.no_real:
+        print(f"real crops not found at {real_dir}; pass --real-crops or --no-real")
+    if not datasets:
+        parser.error("nothing to evaluate: pass --synthetic and/or --real-crops")
+
+    for data_name, source in datasets.items():
+        results = {label: evaluate(p, source) for label, p in predictors.items()}
+        print(format_table(f"\n{data_name}", results))
+        report[data_name] = {label: r.summary() for label, r in results.items()}
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,62 @@
+"""Augmentation keeps keypoints on the image content they label."""
+
+import numpy as np
+
+from conesight_train.augment import AugmentParams, PhotoAugment
+from conesight_train.data.patches import KeypointPatch
+from conesight_train.keypoints import MIRROR_PERMUTATION
+
+GEOMETRY_ONLY = AugmentParams(
+    p_geometric=1.0,
+    p_mirror=0.5,
+    p_truncate=0.0,
+    p_neighbour=0.0,
+    p_colour=0.0,
+    p_gamma=0.0,
+    p_blur=0.0,
+    p_noise=0.0,
+    p_jpeg=0.0,
+    scale_range=(0.85, 1.15),
+    shift_fraction=0.06,
+)
+
+
+def dots_patch() -> KeypointPatch:
+    """Bright dots of distinct intensity at 7 keypoints on black."""
+    keypoints = np.array(
+        [[40, 12], [33, 30], [30, 45], [26, 64], [47, 30], [50, 45], [54, 64]], dtype=np.float32
+    )
+    patch = np.zeros((80, 80, 3), np.uint8)
+    for i, (x, y) in enumerate(keypoints.astype(int)):
+        patch[y - 1 : y + 2, x - 1 : x + 2] = 100 + 20 * i
+    return KeypointPatch(patch, keypoints)
+
+
+def test_geometric_augmentation_moves_keypoints_with_the_pixels():
+    augment = PhotoAugment(GEOMETRY_ONLY)
+    sample = dots_patch()
+    mirrored_seen = False
+    for seed in range(20):
+        out = augment(sample, np.random.default_rng(seed))
+        for i, (x, y) in enumerate(out.keypoints_px):
+            xi, yi = round(float(x)), round(float(y))
+            window = out.patch_rgb[yi - 1 : yi + 2, xi - 1 : xi + 2, 0].astype(int)
+            # The dot at the new keypoint is the one of the keypoint's identity: left/right
+            # swap under mirroring, so the intensity belongs to the mirrored source index.
+            source_index = [i, MIRROR_PERMUTATION[i]]
+            assert window.max() > 60, (seed, i)
+            expected = [100 + 20 * j for j in source_index]
+            assert min(abs(window.max() - e) for e in expected) < 25, (seed, i, window.max())
+        mirrored_seen |= bool(out.keypoints_px[1, 0] > out.keypoints_px[4, 0])
+    assert not mirrored_seen  # left keypoints stay on the image left after mirroring
+
+
+def test_augmentation_is_seeded_and_keeps_dtype():
+    augment = PhotoAugment()
+    sample = dots_patch()
+    a = augment(sample, np.random.default_rng(7))
+    b = augment(sample, np.random.default_rng(7))
+    c = augment(sample, np.random.default_rng(8))
+    np.testing.assert_array_equal(a.patch_rgb, b.patch_rgb)
+    assert a.patch_rgb.dtype == np.uint8 and a.patch_rgb.shape == (80, 80, 3)
+    assert not np.array_equal(a.patch_rgb, c.patch_rgb)
