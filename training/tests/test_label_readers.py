@@ -10,6 +10,7 @@ from conesight_train.data.errors import LabelError
 from conesight_train.data.patches import RealCropPatches
 from conesight_train.data.rektnet_csv import read_rektnet_csv
 from conesight_train.data.sim_patches import read_patch_index
+from conesight_train.data.supervisely_boxes import read_supervisely_boxes
 from conesight_train.data.supervisely_keypoints import read_keypoint_crops
 from conesight_train.data.yolo_txt import read_yolo_txt
 
@@ -152,3 +153,39 @@ def test_patch_index_reads_and_rejects_bad_lines(tmp_path):
     (tmp_path / "patches" / "index.jsonl").write_text(good + "\n" + bad + "\n")
     with pytest.raises(LabelError, match=r"index\.jsonl:2: keypoints_px must be 7"):
         read_patch_index(tmp_path)
+
+
+def _box(title, exterior, geometry="rectangle"):
+    return {"classTitle": title, "geometryType": geometry, "points": {"exterior": exterior}}
+
+
+def test_supervisely_boxes_map_classes_and_edges(tmp_path):
+    path = tmp_path / "img.png.json"
+    objects = [_box("yellow_cone", [[10, 20], [19, 49]]), _box("unknown_cone", [[5, 5], [1, 1]])]
+    path.write_text(json.dumps({"size": {"width": 64, "height": 64}, "objects": objects}))
+    ann = read_supervisely_boxes(path)
+    first, second = ann.boxes
+    assert first.class_id == 1
+    assert (first.x_min_px, first.y_min_px, first.x_max_px, first.y_max_px) == (
+        9.5,
+        19.5,
+        19.5,
+        49.5,
+    )
+    assert second.class_id is None and second.x_min_px == 0.5
+
+
+@pytest.mark.parametrize(
+    ("obj", "message"),
+    [
+        (_box("red_cone", [[0, 0], [1, 1]]), "object 1: unknown class 'red_cone'"),
+        (_box("blue_cone", [[0, 0], [1, 1]], "polygon"), "object 1: geometryType 'polygon'"),
+        (_box("blue_cone", [[0, 0]]), "object 1: expected exterior"),
+    ],
+)
+def test_supervisely_boxes_malformed_names_file_and_object(tmp_path, obj, message):
+    path = tmp_path / "img.png.json"
+    objects = [_box("blue_cone", [[0, 0], [3, 3]]), obj]
+    path.write_text(json.dumps({"size": {"width": 8, "height": 8}, "objects": objects}))
+    with pytest.raises(LabelError, match=rf"img\.png\.json: {message}"):
+        read_supervisely_boxes(path)
