@@ -1,10 +1,11 @@
 """Keypoint network speed with ONNX Runtime on this CPU, production vs baseline side by side
 (`conesight-bench-keypoints`).
 
-Measures batched throughput (patches/s at each `--batch` size, for `--seconds` each) and
-single-patch latency (median and 90th percentile of `--latency-runs` batch-1 calls), then prints
-one table with the production / baseline ratios. Without `--production`/`--baseline` ONNX files,
-freshly initialised networks are exported to a temporary folder (speed does not depend on the
+Reports multiply-accumulates per patch (independent of machine load), measures batched
+throughput (patches/s at each `--batch` size, for `--seconds` each) and single-patch latency
+(median and 90th percentile of `--latency-runs` batch-1 calls), then prints one table with the
+production / baseline ratios. Without `--production`/`--baseline` ONNX files, freshly
+initialised networks are exported to a temporary folder (speed does not depend on the
 weights). The 1-minute load average is printed: other jobs on the cores lower every number.
 """
 
@@ -26,6 +27,35 @@ from conesight_train.export import INPUT_NAME, export_onnx
 from conesight_train.models import build_model
 
 DEFAULT_BATCHES = (64, 256)
+
+
+def multiply_accumulates(model: torch.nn.Module, patch_size_px: int = 80) -> int:
+    """Multiply-accumulates of convolutions and linear layers for one patch (load-independent)."""
+    total = 0
+
+    def conv_hook(module: torch.nn.Conv2d, _: tuple, output: torch.Tensor) -> None:
+        nonlocal total
+        per_output = (
+            module.in_channels // module.groups * module.kernel_size[0] * module.kernel_size[1]
+        )
+        total += output.numel() * per_output
+
+    def linear_hook(module: torch.nn.Linear, _: tuple, output: torch.Tensor) -> None:
+        nonlocal total
+        total += output.numel() * module.in_features
+
+    handles = []
+    for m in model.modules():
+        if isinstance(m, torch.nn.Conv2d):
+            handles.append(m.register_forward_hook(conv_hook))
+        elif isinstance(m, torch.nn.Linear):
+            handles.append(m.register_forward_hook(linear_hook))
+    model.eval()
+    with torch.no_grad():
+        model(torch.zeros(1, 3, patch_size_px, patch_size_px))
+    for h in handles:
+        h.remove()
+    return total
 
 
 def session(path: Path, threads: int, spin: bool) -> ort.InferenceSession:
@@ -94,6 +124,9 @@ def main(argv: list[str] | None = None) -> None:
                 export_onnx(build_model(name), given)
             paths[name] = given
         results = {name: measure(path, args) for name, path in paths.items()}
+    for name in results:
+        # Default widths; an ONNX file given on the command line may differ.
+        results[name]["mega_macs_per_patch"] = multiply_accumulates(build_model(name)) / 1e6
 
     load1 = os.getloadavg()[0]
     print(
@@ -105,7 +138,7 @@ def main(argv: list[str] | None = None) -> None:
     for key in results["production"]:
         p, b = results["production"][key], results["baseline"][key]
         # Ratio reads "production is N times better": throughput p/b, latency b/p.
-        ratio = b / p if key.endswith("_ms") else p / b
+        ratio = b / p if key.endswith("_ms") or key.startswith("mega_macs") else p / b
         print(f"{key:<30}{p:>14.2f}{b:>14.2f}{ratio:>9.2f}x")
     if args.json:
         args.json.write_text(json.dumps({"load_average_1min": load1, **results}, indent=2) + "\n")
