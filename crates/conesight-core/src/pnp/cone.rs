@@ -145,24 +145,25 @@ impl ConeSolver {
         let mut inliers = self.classify(&fit.lin, &used);
         let flagged = used_count - count(&inliers);
 
+        // Converged least squares on exactly the final inliers already?
+        let mut final_fit_done = false;
         if flagged > 0 {
             // Refit without the flagged keypoints; accept if every remaining one fits.
-            let mut settled = false;
             if flagged == 1 {
                 let (refit, n) = self.gauss_newton(
                     fit,
                     &measurements,
                     &inliers,
                     RobustLoss::Squared,
-                    ROBUST_RELATIVE_TOLERANCE,
+                    FINAL_RELATIVE_TOLERANCE,
                 )?;
                 iterations += n;
                 if self.classify(&refit.lin, &used) == inliers {
                     fit = refit;
-                    settled = true;
+                    final_fit_done = true;
                 }
             }
-            if !settled {
+            if !final_fit_done {
                 let (best, n) = self.leave_one_out(fit, &measurements, &used)?;
                 iterations += n;
                 fit = best;
@@ -176,15 +177,17 @@ impl ConeSolver {
                 needed: self.params.min_inliers,
             });
         }
-        // Final least squares on the inliers.
-        let (fit, n) = self.gauss_newton(
-            fit,
-            &measurements,
-            &inliers,
-            RobustLoss::Squared,
-            FINAL_RELATIVE_TOLERANCE,
-        )?;
-        iterations += n;
+        if !final_fit_done {
+            let n;
+            (fit, n) = self.gauss_newton(
+                fit,
+                &measurements,
+                &inliers,
+                RobustLoss::Squared,
+                FINAL_RELATIVE_TOLERANCE,
+            )?;
+            iterations += n;
+        }
         self.estimate(&fit, inliers, &measurements, iterations)
     }
 
