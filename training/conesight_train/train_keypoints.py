@@ -59,6 +59,7 @@ class TrainConfig:
     weight_decay: float = 1e-4
     seed: int = 0
     threads: int = 2
+    workers: int = 0  # DataLoader worker processes for reading and augmentation
     augment: bool = True
     checkpoint_every: int = 500
     progress: bool = True
@@ -209,7 +210,12 @@ def train(config: TrainConfig, resume: Path | None = None) -> TrainResult:
         order = epoch_order(len(train_set), config.seed, epoch)
         start = batch_in_epoch * config.batch_size
         usable = steps_per_epoch * config.batch_size
-        loader = DataLoader(train_set, batch_size=config.batch_size, sampler=order[start:usable])
+        loader = DataLoader(
+            train_set,
+            batch_size=config.batch_size,
+            sampler=order[start:usable],
+            num_workers=config.workers,
+        )
         model.train()
         for images, targets in loader:
             for group in optimizer.param_groups:
@@ -281,6 +287,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--weight-decay", type=float, default=defaults.weight_decay)
     parser.add_argument("--seed", type=int, default=defaults.seed)
     parser.add_argument("--threads", type=int, default=defaults.threads)
+    parser.add_argument("--workers", type=int, default=defaults.workers, help="data processes")
     parser.add_argument("--no-augment", action="store_true")
     parser.add_argument(
         "--stop-after", type=int, default=0, help="stop after N steps (resume with --resume)"
@@ -301,6 +308,7 @@ def main(argv: list[str] | None = None) -> None:
         weight_decay=args.weight_decay,
         seed=args.seed,
         threads=args.threads,
+        workers=args.workers,
         stop_after=args.stop_after,
         augment=not args.no_augment,
         checkpoint_every=args.checkpoint_every,

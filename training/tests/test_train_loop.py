@@ -67,3 +67,12 @@ def test_checkpoint_and_onnx_evaluate_the_same(tmp_path):
     from_torch = evaluate(predictor_for(result.last_checkpoint), data)
     from_onnx = evaluate(predictor_for(onnx_path), data)
     assert abs(from_torch.mean_px - from_onnx.mean_px) < 1e-3
+
+
+def test_worker_processes_give_the_same_run(tmp_path):
+    inline = train(config(tmp_path / "a", epochs=1))
+    workers = train(config(tmp_path / "b", epochs=1, workers=1))
+    a = load_checkpoint(inline.last_checkpoint)["model_state"]
+    b = load_checkpoint(workers.last_checkpoint)["model_state"]
+    for key in a:
+        torch.testing.assert_close(a[key], b[key], rtol=1e-5, atol=1e-6, msg=key)
