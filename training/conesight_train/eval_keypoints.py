@@ -7,7 +7,9 @@ Each `--model LABEL=PATH` is a training checkpoint (`.pt`, run in PyTorch) or an
 - `--real-crops DIR`: Supervisely keypoint crops (default `../shared/data/real-dev/
   fsoco-keypoint-crops` when present). Each crop is taken as the detector box and cut by the crop
   rule into an 80x80 patch; its keypoints map by the same rule, so errors are in 80x80 patch
-  pixels ("at 80x80 scale"). Crops without 7 points are skipped and counted.
+  pixels ("at 80x80 scale"). Around the crop the patch repeats the crop's border pixels
+  (`--real-outside replicate`, standing in for the frame a detector box sits in) or shows the
+  rule's black fill (`fill`). Crops without 7 points are skipped and counted.
 
 Prints, per data set, the mean / median / 90th percentile error and a per-keypoint table with
 one column per model, and writes everything to `--json`.
@@ -84,6 +86,12 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--synthetic", action="append", default=[], help="held-out patches")
     parser.add_argument("--real-crops", type=Path, help="Supervisely keypoint crop folder")
     parser.add_argument("--no-real", action="store_true", help="skip the real crops")
+    parser.add_argument(
+        "--real-outside",
+        choices=RealCropPatches.OUTSIDE_MODES,
+        default="replicate",
+        help="what lies around a real crop in its patch (see RealCropPatches)",
+    )
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--json", type=Path, help="write the results here")
     args = parser.parse_args(argv)
@@ -103,7 +111,8 @@ def main(argv: list[str] | None = None) -> None:
     real_dir = args.real_crops or DEFAULT_REAL_CROPS
     if not args.no_real and real_dir.is_dir():
         crop_set = read_keypoint_crops(real_dir)
-        datasets["real_crops"] = RealCropPatches(crop_set.crops)
+        datasets["real_crops"] = RealCropPatches(crop_set.crops, outside=args.real_outside)
+        report["real_crops_outside"] = args.real_outside
         report["real_crops_skipped_not_7_points"] = len(crop_set.skipped_point_count)
     elif not args.no_real:
         print(f"real crops not found at {real_dir}; pass --real-crops or --no-real")

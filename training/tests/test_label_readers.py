@@ -41,6 +41,10 @@ def test_real_crops_read_with_conesight_order(real_crops):
 
 def test_real_crops_map_into_80x80_patches(real_crops):
     patches = RealCropPatches(real_crops.crops[:20])
+    filled = RealCropPatches(real_crops.crops[:20], outside="fill")
+    # Same geometry either way; replicate leaves no black side bands, fill does.
+    np.testing.assert_allclose(patches[3].keypoints_px, filled[3].keypoints_px, atol=1e-9)
+    assert patches[3].patch_rgb[:, :4].mean() > 30 and filled[3].patch_rgb[:, :4].max() == 0
     for i in range(len(patches)):
         sample = patches[i]
         assert sample.patch_rgb.shape == (80, 80, 3)

@@ -84,12 +84,29 @@ def read_rgb(path: Path) -> np.ndarray:
 
 
 class RealCropPatches:
-    """Supervisely keypoint crops as 80x80 patches: the whole crop is taken as the detector box
-    and cut by the crop rule, keypoints mapped by the same rule (evaluation only)."""
+    """Keypoint crops (real photographs) as 80x80 patches for evaluation.
 
-    def __init__(self, crops: Sequence[KeypointCrop], params: CropParams | None = None) -> None:
+    Each crop is taken as the detector box and cut by the crop rule; keypoints map by the same
+    rule, so errors come out in 80x80 patch pixels. The rule's square is larger than a crop
+    (side 1.2 x the longer side), and a detector box in a full frame would have image around
+    it: `outside="replicate"` (default) extends the crop by repeating its border pixels
+    before cutting (geometry unchanged), `outside="fill"` uses the rule's fill colour (black
+    bands the networks never see in rendered patches).
+    """
+
+    OUTSIDE_MODES = ("replicate", "fill")
+
+    def __init__(
+        self,
+        crops: Sequence[KeypointCrop],
+        params: CropParams | None = None,
+        outside: str = "replicate",
+    ) -> None:
+        if outside not in self.OUTSIDE_MODES:
+            raise ValueError(f"outside={outside!r}; expected one of {self.OUTSIDE_MODES}")
         self.crops = list(crops)
         self.params = params or CropParams()
+        self.outside = outside
 
     def __len__(self) -> int:
         return len(self.crops)
@@ -103,8 +120,14 @@ class RealCropPatches:
                 f"{crop.image_path}: image is {width}x{height}, its label says "
                 f"{crop.width_px}x{crop.height_px}"
             )
-        patch, transform = crop_patch(image, PixelBox.whole_image(width, height), self.params)
-        keypoints = transform.patch_from_image(crop.keypoints_px).astype(np.float32)
+        pad = 0
+        if self.outside == "replicate":
+            side = max(width, height) * (1.0 + 2.0 * self.params.margin_fraction)
+            pad = int(np.ceil(side / 2)) + 2
+            image = cv2.copyMakeBorder(image, pad, pad, pad, pad, cv2.BORDER_REPLICATE)
+        bbox = PixelBox.from_pixel_range(pad, pad, pad + width - 1, pad + height - 1)
+        patch, transform = crop_patch(image, bbox, self.params)
+        keypoints = transform.patch_from_image(crop.keypoints_px + pad).astype(np.float32)
         return KeypointPatch(patch, keypoints)
 
 
