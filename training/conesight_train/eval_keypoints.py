@@ -38,43 +38,88 @@ from conesight_train.train_keypoints import open_sources
 REPO_ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_REAL_CROPS = REPO_ROOT.parent / "shared" / "data" / "real-dev" / "fsoco-keypoint-crops"
 
-Predictor = Callable[[np.ndarray], np.ndarray]  # float32 [N, 3, 80, 80] -> [N, 7, 2]
+# float32 [N, 3, 80, 80] -> (keypoints [N, 7, 2], sigma_px [N, 7] or None)
+Predictor = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray | None]]
 
 
 def predictor_for(path: Path) -> Predictor:
     """A batch predictor for a checkpoint (PyTorch) or an ONNX file (ONNX Runtime)."""
     if path.suffix == ".onnx":
         sess = ort_session(path)
-        return lambda x: sess.run(None, {INPUT_NAME: x})[0]
+
+        def run_onnx(x: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+            outputs = sess.run(None, {INPUT_NAME: x})
+            return outputs[0], (outputs[1] if len(outputs) > 1 else None)
+
+        return run_onnx
     model, _, _ = load_model_from_checkpoint(path)
 
-    def run(x: np.ndarray) -> np.ndarray:
+    def run(x: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         with torch.no_grad():
-            return model(torch.from_numpy(x)).keypoints_px.numpy()
+            out = model(torch.from_numpy(x))
+        sigma = None if out.sigma_px is None else out.sigma_px.numpy()
+        return out.keypoints_px.numpy(), sigma
 
     return run
 
 
 def evaluate(predict: Predictor, source: PatchSource, batch_size: int = 256) -> KeypointErrors:
-    """Euclidean keypoint errors of `predict` over every patch of `source`."""
+    """Euclidean keypoint errors (and sigma, if predicted) of `predict` over `source`."""
     loader = DataLoader(KeypointDataset(source), batch_size=batch_size)
-    errors = []
+    errors, sigmas = [], []
     for images, keypoints in tqdm(loader, desc="evaluate", leave=False):
-        predicted = predict(images.numpy())
+        predicted, sigma = predict(images.numpy())
         errors.append(np.linalg.norm(predicted - keypoints.numpy(), axis=-1))
-    return KeypointErrors(np.concatenate(errors))
+        if sigma is not None:
+            sigmas.append(sigma)
+    return KeypointErrors(np.concatenate(errors), np.concatenate(sigmas) if sigmas else None)
+
+
+def plot_per_keypoint(results: dict[str, dict[str, KeypointErrors]], path: Path) -> None:
+    """PNG: per-keypoint mean error, one bar per model, one panel per data set."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, len(results), figsize=(6 * len(results), 4), squeeze=False)
+    for ax, (data_name, by_model) in zip(axes[0], results.items(), strict=True):
+        width = 0.8 / len(by_model)
+        x = np.arange(len(KEYPOINT_NAMES))
+        for i, (label, errors) in enumerate(by_model.items()):
+            means = errors.errors_px.mean(axis=0)
+            ax.bar(x + i * width, means, width, label=f"{label} ({errors.mean_px:.2f} px)")
+        ax.set_xticks(x + width * (len(by_model) - 1) / 2, KEYPOINT_NAMES, rotation=30)
+        ax.set_ylabel("mean error, 80x80 patch px")
+        ax.set_title(data_name)
+        ax.legend()
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
 
 
 def format_table(title: str, results: dict[str, KeypointErrors]) -> str:
     """Side-by-side table: summary rows, then one row per keypoint (mean px)."""
     labels = list(results)
     lines = [title, f"{'':<16}" + "".join(f"{label:>14}" for label in labels)]
+    summaries = {label: results[label].summary() for label in labels}
     for key in ("mean_px", "median_px", "p90_px"):
-        values = [results[label].summary()[key] for label in labels]
+        values = [summaries[label][key] for label in labels]
         lines.append(f"{key:<16}" + "".join(f"{v:>14.3f}" for v in values))
     for index, name in enumerate(KEYPOINT_NAMES):
         values = [float(results[label].errors_px[:, index].mean()) for label in labels]
         lines.append(f"{name:<16}" + "".join(f"{v:>14.3f}" for v in values))
+    for key, short in (
+        ("sigma_error_rank_correlation", "sigma~error rho"),
+        ("error_over_sigma_mean", "mean |e|/sigma"),
+    ):
+        cells = [summaries[label].get(key) for label in labels]
+        if any(c is not None for c in cells):
+            lines.append(
+                f"{short:<16}"
+                + "".join(f"{c:>14.3f}" if c is not None else f"{'-':>14}" for c in cells)
+            )
     count = results[labels[0]].errors_px.shape[0]
     lines.append(f"({count} patches; errors in 80x80 patch pixels)")
     return "\n".join(lines)
@@ -94,6 +139,7 @@ def main(argv: list[str] | None = None) -> None:
     )
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--json", type=Path, help="write the results here")
+    parser.add_argument("--png", type=Path, help="per-keypoint bar chart")
     args = parser.parse_args(argv)
     torch.set_num_threads(args.threads)
 
@@ -119,10 +165,14 @@ def main(argv: list[str] | None = None) -> None:
     if not datasets:
         parser.error("nothing to evaluate: pass --synthetic and/or --real-crops")
 
+    all_results = {}
     for data_name, source in datasets.items():
         results = {label: evaluate(p, source) for label, p in predictors.items()}
         print(format_table(f"\n{data_name}", results))
         report[data_name] = {label: r.summary() for label, r in results.items()}
+        all_results[data_name] = results
+    if args.png:
+        plot_per_keypoint(all_results, args.png)
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")

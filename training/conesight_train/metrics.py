@@ -12,11 +12,20 @@ from torch.utils.data import DataLoader
 from conesight_train.keypoints import KEYPOINT_NAMES
 
 
+def rank_correlation(a: np.ndarray, b: np.ndarray) -> float:
+    """Spearman's rank correlation of two equally long 1-D arrays (ties broken by order)."""
+    ranks_a = np.argsort(np.argsort(a)).astype(np.float64)
+    ranks_b = np.argsort(np.argsort(b)).astype(np.float64)
+    return float(np.corrcoef(ranks_a, ranks_b)[0, 1])
+
+
 @dataclass(frozen=True)
 class KeypointErrors:
-    """Euclidean errors [M, 7] in patch pixels, with the summaries people read."""
+    """Euclidean errors [M, 7] in patch pixels, with the summaries people read; `sigma_px`
+    [M, 7] is the network's own expected error where it predicts one."""
 
     errors_px: np.ndarray
+    sigma_px: np.ndarray | None = None
 
     @property
     def mean_px(self) -> float:
@@ -26,13 +35,21 @@ class KeypointErrors:
         return {n: float(v) for n, v in zip(KEYPOINT_NAMES, self.errors_px.mean(0), strict=True)}
 
     def summary(self) -> dict[str, object]:
-        return {
+        result: dict[str, object] = {
             "count": int(self.errors_px.shape[0]),
             "mean_px": self.mean_px,
             "median_px": float(np.median(self.errors_px)),
             "p90_px": float(np.percentile(self.errors_px, 90)),
             "per_keypoint_mean_px": self.per_keypoint_mean_px(),
         }
+        if self.sigma_px is not None:
+            # Is sigma usable as a PnP weight? It should rank errors (correlation > 0) and
+            # match their size (Laplace: mean |e| / sigma near 1).
+            errors, sigmas = self.errors_px.ravel(), self.sigma_px.ravel()
+            result["sigma_mean_px"] = float(sigmas.mean())
+            result["sigma_error_rank_correlation"] = rank_correlation(sigmas, errors)
+            result["error_over_sigma_mean"] = float((errors / sigmas).mean())
+        return result
 
 
 @torch.no_grad()

@@ -67,6 +67,8 @@ def test_checkpoint_and_onnx_evaluate_the_same(tmp_path):
     from_torch = evaluate(predictor_for(result.last_checkpoint), data)
     from_onnx = evaluate(predictor_for(onnx_path), data)
     assert abs(from_torch.mean_px - from_onnx.mean_px) < 1e-3
+    assert from_torch.sigma_px is not None and from_onnx.sigma_px is not None
+    np.testing.assert_allclose(from_torch.sigma_px, from_onnx.sigma_px, atol=1e-3)
 
 
 def test_worker_processes_give_the_same_run(tmp_path):
