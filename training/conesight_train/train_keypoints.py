@@ -1,6 +1,7 @@
 """Trains a keypoint network (`conesight-train-keypoints`).
 
-Data sources (`--train`, `--val`, repeatable): a renderer output folder holding
+Settings come from `--config FILE.yaml` (the fields of `TrainConfig`; see `training/configs/`),
+overridden by flags. Data sources (`--train`, `--val`, repeatable): a renderer output folder holding
 `patches/index.jsonl`, or `toy:COUNT[:SEED]` for procedural cones (smoke runs and tests). Without
 `--val`, a seeded `--val-fraction` of the training data is held out.
 
@@ -19,12 +20,13 @@ import argparse
 import json
 import math
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
+import yaml
 from torch.utils.data import DataLoader
 from tqdm import tqdm
 
@@ -272,58 +274,48 @@ def train(config: TrainConfig, resume: Path | None = None) -> TrainResult:
     return result
 
 
+def load_config(path: str | Path) -> TrainConfig:
+    """A TrainConfig from a YAML file of its fields; unknown keys are an error naming the file."""
+    path = Path(path)
+    data = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
+    if not isinstance(data, dict):
+        raise ValueError(f"{path}: expected a mapping of TrainConfig fields")
+    known = {f.name for f in fields(TrainConfig)}
+    unknown = sorted(set(data) - known)
+    if unknown:
+        raise ValueError(f"{path}: unknown settings {unknown}; known: {sorted(known)}")
+    return TrainConfig(**data)
+
+
 def main(argv: list[str] | None = None) -> None:
-    defaults = TrainConfig()
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--model", choices=MODEL_NAMES, default=defaults.model)
-    parser.add_argument("--train", action="append", default=[], help="renderer folder or toy:N")
-    parser.add_argument("--val", action="append", default=[], help="validation source")
-    parser.add_argument("--val-fraction", type=float, default=defaults.val_fraction)
-    parser.add_argument("--out", default=defaults.out_dir, help="output folder")
-    parser.add_argument("--epochs", type=int, default=defaults.epochs)
-    parser.add_argument("--max-steps", type=int, default=defaults.max_steps)
-    parser.add_argument("--batch-size", type=int, default=defaults.batch_size)
-    parser.add_argument("--lr", type=float, default=defaults.lr)
-    parser.add_argument("--weight-decay", type=float, default=defaults.weight_decay)
-    parser.add_argument("--seed", type=int, default=defaults.seed)
-    parser.add_argument("--threads", type=int, default=defaults.threads)
-    parser.add_argument("--workers", type=int, default=defaults.workers, help="data processes")
-    parser.add_argument("--no-augment", action="store_true")
-    parser.add_argument(
-        "--stop-after", type=int, default=0, help="stop after N steps (resume with --resume)"
-    )
-    parser.add_argument("--checkpoint-every", type=int, default=defaults.checkpoint_every)
+    parser.add_argument("--config", type=Path, help="YAML file of settings (flags override)")
+    parser.add_argument("--model", choices=MODEL_NAMES)
+    parser.add_argument("--train", action="append", help="renderer folder or toy:N")
+    parser.add_argument("--val", action="append", help="validation source")
+    parser.add_argument("--val-fraction", type=float)
+    parser.add_argument("--out", dest="out_dir", help="output folder")
+    parser.add_argument("--epochs", type=int)
+    parser.add_argument("--max-steps", type=int)
+    parser.add_argument("--batch-size", type=int)
+    parser.add_argument("--lr", type=float)
+    parser.add_argument("--weight-decay", type=float)
+    parser.add_argument("--seed", type=int)
+    parser.add_argument("--threads", type=int)
+    parser.add_argument("--workers", type=int, help="data loading processes")
+    parser.add_argument("--no-augment", dest="augment", action="store_const", const=False)
+    parser.add_argument("--stop-after", type=int, help="stop after N steps (then --resume)")
+    parser.add_argument("--checkpoint-every", type=int)
+    parser.add_argument("--no-progress", dest="progress", action="store_const", const=False)
     parser.add_argument("--resume", action="store_true", help="continue from OUT/last.pt")
-    args = parser.parse_args(argv)
-    config = TrainConfig(
-        model=args.model,
-        train=args.train,
-        val=args.val,
-        val_fraction=args.val_fraction,
-        out_dir=args.out,
-        epochs=args.epochs,
-        max_steps=args.max_steps,
-        batch_size=args.batch_size,
-        lr=args.lr,
-        weight_decay=args.weight_decay,
-        seed=args.seed,
-        threads=args.threads,
-        workers=args.workers,
-        stop_after=args.stop_after,
-        augment=not args.no_augment,
-        checkpoint_every=args.checkpoint_every,
-    )
-    resume = Path(args.out) / "last.pt" if args.resume else None
+    args = vars(parser.parse_args(argv))
+    config_path, resume_flag = args.pop("config"), args.pop("resume")
+    config = load_config(config_path) if config_path else TrainConfig()
+    config = replace(config, **{k: v for k, v in args.items() if v is not None})
+    resume = Path(config.out_dir) / "last.pt" if resume_flag else None
     result = train(config, resume)
-    print(
-        json.dumps(
-            {
-                "steps": result.steps,
-                "val_mean_px": result.val_mean_px,
-                "last": str(result.last_checkpoint),
-            }
-        )
-    )
+    summary = {"steps": result.steps, "val_mean_px": result.val_mean_px}
+    print(json.dumps({**summary, "last": str(result.last_checkpoint)}))
 
 
 if __name__ == "__main__":

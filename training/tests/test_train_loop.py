@@ -2,14 +2,23 @@
 
 import itertools
 import json
+from pathlib import Path
 
 import numpy as np
+import pytest
 import torch
 
 from conesight_train.checkpoint import load_checkpoint, load_model_from_checkpoint
 from conesight_train.eval_keypoints import evaluate, predictor_for
 from conesight_train.export import export_with_card
-from conesight_train.train_keypoints import TrainConfig, learning_rate, open_source, train
+from conesight_train.train_keypoints import (
+    TrainConfig,
+    learning_rate,
+    load_config,
+    main,
+    open_source,
+    train,
+)
 
 
 def config(tmp_path, **overrides) -> TrainConfig:
@@ -78,3 +87,36 @@ def test_worker_processes_give_the_same_run(tmp_path):
     b = load_checkpoint(workers.last_checkpoint)["model_state"]
     for key in a:
         torch.testing.assert_close(a[key], b[key], rtol=1e-5, atol=1e-6, msg=key)
+
+
+def test_yaml_configs_load_and_unknown_keys_are_errors(tmp_path):
+    configs = Path(__file__).resolve().parents[1] / "configs"
+    for path in sorted(configs.glob("*.yaml")):
+        assert load_config(path).model in ("production", "baseline")
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("model: production\nlearning_rate: 0.1\n")
+    with pytest.raises(ValueError, match=r"bad\.yaml: unknown settings \['learning_rate'\]"):
+        load_config(bad)
+
+
+def test_cli_flags_override_the_config(tmp_path):
+    config_path = tmp_path / "c.yaml"
+    config_path.write_text(f"model: production\ntrain: ['toy:24:1']\nout_dir: {tmp_path / 'x'}\n")
+    main(
+        [
+            "--config",
+            str(config_path),
+            "--out",
+            str(tmp_path / "y"),
+            "--epochs",
+            "1",
+            "--batch-size",
+            "8",
+            "--threads",
+            "1",
+            "--no-progress",
+        ]
+    )
+    saved = load_checkpoint(tmp_path / "y" / "last.pt")["config"]
+    assert saved["epochs"] == 1 and saved["train"] == ["toy:24:1"] and saved["progress"] is False
+    assert not (tmp_path / "x").exists()
