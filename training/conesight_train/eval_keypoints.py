@@ -9,7 +9,8 @@ Each `--model LABEL=PATH` is a training checkpoint (`.pt`, run in PyTorch) or an
   rule into an 80x80 patch; its keypoints map by the same rule, so errors are in 80x80 patch
   pixels ("at 80x80 scale"). Around the crop the patch repeats the crop's border pixels
   (`--real-outside replicate`, standing in for the frame a detector box sits in) or shows the
-  rule's black fill (`fill`). Crops without 7 points are skipped and counted.
+  rule's black fill (`fill`). Crops without 7 points are skipped and counted. The crops
+  without the labellers' "bad quality" tag are also reported on their own.
 
 Prints, per data set, the mean / median / 90th percentile error and a per-keypoint table with
 one column per model, and writes everything to `--json`.
@@ -39,6 +40,9 @@ REPO_ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_REAL_CROPS = REPO_ROOT.parent / "shared" / "data" / "real-dev" / "fsoco-keypoint-crops"
 
 # float32 [N, 3, 80, 80] -> (keypoints [N, 7, 2], sigma_px [N, 7] or None)
+# Supervisely tag the labellers put on blurry or ambiguous crops (about 40 % of the set).
+BAD_QUALITY_TAG = "bad quality"
+
 Predictor = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray | None]]
 
 
@@ -158,6 +162,10 @@ def main(argv: list[str] | None = None) -> None:
     if not args.no_real and real_dir.is_dir():
         crop_set = read_keypoint_crops(real_dir)
         datasets["real_crops"] = RealCropPatches(crop_set.crops, outside=args.real_outside)
+        good = [c for c in crop_set.crops if BAD_QUALITY_TAG not in c.tags]
+        datasets["real_crops_without_bad_quality_tag"] = RealCropPatches(
+            good, outside=args.real_outside
+        )
         report["real_crops_outside"] = args.real_outside
         report["real_crops_skipped_not_7_points"] = len(crop_set.skipped_point_count)
     elif not args.no_real:
