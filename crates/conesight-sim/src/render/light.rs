@@ -7,7 +7,7 @@
 
 use nalgebra::{Isometry3, Point2, Point3, Vector3};
 
-use super::texture::NoiseTable;
+use super::texture::{PROFILE_SAMPLES, Textures};
 use crate::scene::Environment;
 
 /// Width of the soft shadow edge, metres.
@@ -15,31 +15,66 @@ const PENUMBRA_M: f64 = 0.03;
 /// Distance at which haze halves contrast, metres.
 const HAZE_DISTANCE_M: f64 = 350.0;
 
-/// A convex shadow polygon on the ground, counter-clockwise, with its image rectangle.
+/// A convex shadow polygon on the ground, with its image rectangle.
 #[derive(Debug, Clone)]
 pub struct ShadowPolygon {
-    /// Vertices (world x, y), counter-clockwise.
-    pub vertices: Vec<Point2<f64>>,
+    /// Edges as outward unit normal `(nx, ny)` and offset `c`: outside distance `n . p - c`.
+    edges: Vec<[f64; 3]>,
+    /// Ground bounding box `[x_min, y_min, x_max, y_max]`, grown by the penumbra.
+    bounds: [f64; 4],
     /// Image rectangle `[col_min, row_min, col_max, row_max]`.
     pub rect: [i64; 4],
 }
 
 impl ShadowPolygon {
-    /// Light factor at a ground point: 0 deep inside, 1 outside, soft at the edge.
-    pub fn light_at(&self, p: &Point2<f64>) -> f64 {
-        let n = self.vertices.len();
-        let mut outside = f64::NEG_INFINITY;
+    /// From counter-clockwise vertices.
+    pub fn new(vertices: &[Point2<f64>], rect: [i64; 4]) -> Self {
+        let n = vertices.len();
+        let mut edges = Vec::with_capacity(n);
+        let mut bounds = [
+            f64::INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NEG_INFINITY,
+        ];
         for i in 0..n {
-            let a = self.vertices[i];
-            let b = self.vertices[(i + 1) % n];
+            let (a, b) = (vertices[i], vertices[(i + 1) % n]);
+            bounds = [
+                bounds[0].min(a.x),
+                bounds[1].min(a.y),
+                bounds[2].max(a.x),
+                bounds[3].max(a.y),
+            ];
             let e = b - a;
             let len = e.norm();
             if len < 1e-12 {
                 continue;
             }
-            // Signed distance, positive to the right of a CCW edge (outside).
-            let d = (e.x * (p.y - a.y) - e.y * (p.x - a.x)) / len;
-            outside = outside.max(-d);
+            // Outward normal of a counter-clockwise edge points to its right.
+            let (nx, ny) = (e.y / len, -e.x / len);
+            edges.push([nx, ny, nx * a.x + ny * a.y]);
+        }
+        let m = PENUMBRA_M;
+        Self {
+            edges,
+            bounds: [bounds[0] - m, bounds[1] - m, bounds[2] + m, bounds[3] + m],
+            rect,
+        }
+    }
+
+    /// Light factor at a ground point: 0 deep inside, 1 outside, soft at the edge.
+    #[inline]
+    pub fn light_at(&self, p: &Point2<f64>) -> f64 {
+        if p.x < self.bounds[0]
+            || p.y < self.bounds[1]
+            || p.x > self.bounds[2]
+            || p.y > self.bounds[3]
+        {
+            return 1.0;
+        }
+        let mut outside = f64::NEG_INFINITY;
+        for [nx, ny, c] in &self.edges {
+            outside = outside.max(nx * p.x + ny * p.y - c);
             if outside > PENUMBRA_M {
                 return 1.0;
             }
@@ -80,8 +115,15 @@ pub fn convex_hull(mut points: Vec<Point2<f64>>) -> Vec<Point2<f64>> {
         (a.x - o.x) * (b.y - o.y) - (a.y - o.y) * (b.x - o.x)
     };
     let mut hull: Vec<Point2<f64>> = Vec::with_capacity(2 * points.len());
-    for p in points.iter().chain(points.iter().rev().skip(1)) {
+    for p in &points {
         while hull.len() >= 2 && cross(&hull[hull.len() - 2], &hull[hull.len() - 1], p) <= 0.0 {
+            hull.pop();
+        }
+        hull.push(*p);
+    }
+    let lower = hull.len() + 1;
+    for p in points.iter().rev().skip(1) {
+        while hull.len() >= lower && cross(&hull[hull.len() - 2], &hull[hull.len() - 1], p) <= 0.0 {
             hull.pop();
         }
         hull.push(*p);
@@ -138,15 +180,17 @@ fn fast_atan2(y: f32, x: f32) -> f32 {
     if y < 0.0 { -r } else { r }
 }
 
-/// Radiance of the sky or backdrop along unit world direction `d`.
-pub fn sky(env: &Environment, noise: &NoiseTable, d: &Vector3<f64>) -> [f32; 3] {
+/// Radiance of the sky or backdrop along unit world direction `d`; `offset` shifts the
+/// backdrop profile and clouds per frame.
+pub fn sky(env: &Environment, tex: &Textures, offset: [f32; 2], d: &Vector3<f64>) -> [f32; 3] {
     let dz = d.z as f32;
     let azimuth = fast_atan2(d.y as f32, d.x as f32);
     // Backdrop: a ragged band above the horizon.
-    let profile = noise.value(azimuth * 12.0, 7.5) * 0.7 + noise.value(azimuth * 60.0, 3.5) * 0.3;
-    let band = env.backdrop_height_rad * (0.3 + profile);
+    let turn = azimuth / std::f32::consts::TAU + 0.5 + offset[0];
+    let index = ((turn.fract() * PROFILE_SAMPLES as f32) as usize).min(PROFILE_SAMPLES - 1);
+    let band = env.backdrop_height_rad * (0.3 + tex.profile[index]);
     if dz < band {
-        let detail = 0.7 + 0.6 * noise.value(azimuth * 400.0, dz * 400.0);
+        let detail = 1.0 + 1.2 * tex.grain.sample(azimuth * 900.0, dz * 900.0, 1.0);
         let light = [0, 1, 2].map(|c| env.ambient_rgb[c] * 0.8 + env.sun_rgb[c] * 0.25);
         let haze = 0.35;
         return [0, 1, 2].map(|c| {
@@ -159,7 +203,10 @@ pub fn sky(env: &Environment, noise: &NoiseTable, d: &Vector3<f64>) -> [f32; 3] 
         .map(|c| env.sky_horizon_rgb[c] + (env.sky_zenith_rgb[c] - env.sky_horizon_rgb[c]) * t);
     if env.cloudiness > 0.0 && dz > 0.01 {
         let (u, v) = (d.x as f32 / dz, d.y as f32 / dz);
-        let cloud = noise.fbm(u * 3.0 + 40.0, v * 3.0, 2.0, 4, 0.001) + 0.5;
+        let cloud = tex
+            .clouds
+            .sample(u * 60.0 + offset[1] * 256.0, v * 60.0, 1.0)
+            + 0.5;
         let cover = ((cloud - (1.0 - env.cloudiness)) * 3.0).clamp(0.0, 1.0);
         let grey = 0.75 + 0.25 * cloud;
         colour = colour.map(|c| c + (grey - c) * cover);
@@ -189,10 +236,7 @@ mod tests {
             Point2::new(0.0, 1.0),
         ]);
         assert_eq!(hull.len(), 4);
-        let poly = ShadowPolygon {
-            vertices: hull,
-            rect: [0, 0, 0, 0],
-        };
+        let poly = ShadowPolygon::new(&hull, [0, 0, 0, 0]);
         assert_eq!(poly.light_at(&Point2::new(0.5, 0.5)), 0.0);
         assert_eq!(poly.light_at(&Point2::new(2.0, 0.5)), 1.0);
         assert!((poly.light_at(&Point2::new(1.0, 0.5)) - 0.5).abs() < 1e-9);

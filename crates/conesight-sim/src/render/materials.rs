@@ -2,7 +2,7 @@
 
 use conesight_core::cone::{ConeClass, ConeModel};
 
-use super::texture::NoiseTable;
+use super::texture::{NoiseTable, Textures};
 use crate::scene::{ConeAppearance, Environment, GroundKind};
 
 /// Linear albedo of a cone's main colour and its stripe colour.
@@ -74,31 +74,51 @@ pub fn mix(a: [f32; 3], b: [f32; 3], t: f32) -> [f32; 3] {
     ]
 }
 
-/// Ground albedo at world `(x, y)`; `footprint_m` is the ground size of one pixel there.
+/// Ground albedo at world `(x, y)`; `footprint_m` is the ground size of one pixel there and
+/// `offset` the frame's texture offset (metres), which makes every frame's ground different.
 pub fn ground_albedo(
     env: &Environment,
-    noise: &NoiseTable,
+    tex: &Textures,
+    offset: [f32; 2],
     x_m: f64,
     y_m: f64,
     footprint_m: f32,
 ) -> [f32; 3] {
-    let (x, y) = (x_m as f32, y_m as f32);
+    let (x, y) = (x_m as f32 + offset[0], y_m as f32 + offset[1]);
     let mut colour = env.ground_rgb;
-    let (wavelength, contrast) = match env.ground {
-        GroundKind::Asphalt => (0.05, 0.9),
-        GroundKind::Concrete => (0.1, 0.5),
-        GroundKind::Grass => (0.04, 1.2),
+    let contrast = match env.ground {
+        GroundKind::Asphalt => 0.9,
+        GroundKind::Concrete => 0.45,
+        GroundKind::Grass => 1.3,
     };
-    // Large-scale blotches, medium stains, fine grain.
-    let large = noise.fbm(x, y, 12.0, 2, footprint_m);
-    let fine = noise.fbm(x + 500.0, y, wavelength * 8.0, 4, footprint_m);
-    let variation = 1.0 + 0.6 * large + contrast * fine;
-    colour = colour.map(|c| c * variation);
+    let grain_scale = tex.grain.size() as f32 / super::texture::GRAIN_TILE_M;
+    let blotch_scale = tex.blotch.size() as f32 / super::texture::BLOTCH_TILE_M;
+    let grain = tex
+        .grain
+        .sample(x * grain_scale, y * grain_scale, footprint_m * grain_scale);
+    // A second, rotated and coarser lookup hides the tile period.
+    let coarse_scale = grain_scale * 0.23;
+    let grain2 = tex.grain.sample(
+        (0.8 * x - 0.6 * y) * coarse_scale + 77.0,
+        (0.6 * x + 0.8 * y) * coarse_scale,
+        footprint_m * coarse_scale,
+    );
+    let blotch = tex.blotch.sample(
+        x * blotch_scale,
+        y * blotch_scale,
+        footprint_m * blotch_scale,
+    );
+    let variation = 1.0 + 0.9 * blotch + contrast * (grain + 0.8 * grain2);
+    colour = colour.map(|c| c * variation.max(0.05));
     if env.patch_fraction > 0.0 {
-        let patch = noise.fbm(x + 1000.0, y - 700.0, 20.0, 3, footprint_m) + 0.5;
+        let patch = tex.blotch.sample(
+            y * blotch_scale * 1.7 + 91.0,
+            x * blotch_scale * 1.7 + 17.0,
+            footprint_m * blotch_scale * 1.7,
+        ) + 0.5;
         let edge = ((patch - (1.0 - env.patch_fraction)) * 12.0).clamp(0.0, 1.0);
         if edge > 0.0 {
-            let texture = 1.0 + 1.2 * noise.fbm(x, y + 900.0, 0.3, 3, footprint_m);
+            let texture = 1.0 + 1.5 * grain2 + 0.8 * grain;
             colour = mix(colour, env.patch_rgb.map(|c| c * texture), edge);
         }
     }
@@ -108,11 +128,13 @@ pub fn ground_albedo(
             let d = (c / 5.0 - (c / 5.0).round()).abs() * 5.0;
             d < 0.012_f32.max(0.5 * footprint_m)
         };
-        if joint(x) || joint(y) {
+        if joint(x_m as f32) || joint(y_m as f32) {
             colour = colour.map(|c| c * 0.55);
         }
     }
+    let fp = f64::from(footprint_m);
     for line in &env.lines {
+        let half = 0.5 * line.width_m;
         let d = distance_to_segment(
             x_m,
             y_m,
@@ -121,24 +143,25 @@ pub fn ground_albedo(
             line.to_m.x,
             line.to_m.y,
         );
-        let half = 0.5 * line.width_m;
-        if d < half + f64::from(footprint_m) {
-            let coverage = ((half + 0.5 * f64::from(footprint_m) - d)
-                / f64::from(footprint_m).max(1e-4))
-            .clamp(0.0, 1.0) as f32;
-            let wear = noise.value(x * 3.0 + 50.0, y * 3.0);
-            colour = mix(colour, line.albedo, coverage * (0.5 + 0.5 * wear));
+        if d < half + fp {
+            let coverage = ((half + 0.5 * fp - d) / fp.max(1e-4)).clamp(0.0, 1.0) as f32;
+            let wear = (grain2 + 0.7).clamp(0.0, 1.0);
+            colour = mix(colour, line.albedo, coverage * wear);
         }
     }
     for mark in &env.tyre_marks {
         let (dx, dy) = (x_m - mark.centre_m.x, y_m - mark.centre_m.y);
-        let r = dx.hypot(dy);
+        let reach = mark.radius_m + mark.width_m;
+        if dx.abs() > reach || dy.abs() > reach {
+            continue;
+        }
+        let r = (dx * dx + dy * dy).sqrt();
         if (r - mark.radius_m).abs() < 0.5 * mark.width_m {
             let a = dy.atan2(dx);
             let (a0, a1) = mark.angles_rad;
             let rel = (a - a0).rem_euclid(std::f64::consts::TAU);
             if rel <= a1 - a0 {
-                let streak = noise.value(x * 8.0, y * 8.0 + 200.0);
+                let streak = (grain * 2.0 + 0.5).clamp(0.0, 1.0);
                 colour = colour.map(|c| c * (1.0 - mark.strength * (0.5 + 0.5 * streak)));
             }
         }

@@ -30,7 +30,7 @@ use crate::{
 };
 use light::{ShadowPolygon, circle_points, shadow_hull};
 use raycast::{FieldOfView, Part, Placed, Solid};
-use texture::NoiseTable;
+use texture::Textures;
 
 /// Sub-sample offsets for edge anti-aliasing (rotated grid), pixels.
 const SUBSAMPLES: [(f64, f64); 4] = [
@@ -48,7 +48,11 @@ pub struct Renderer {
     camera: Camera,
     rays: Vec<[f32; 2]>,
     fov: FieldOfView,
+    textures: std::sync::Arc<Textures>,
 }
+
+/// Key of the textures baked once per renderer (frames differ by texture offsets).
+const TEXTURE_KEY: u64 = 0x5EED_C0DE;
 
 /// Pixel coverage of one cone.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -76,11 +80,12 @@ pub struct Rendered {
 /// Everything a ray needs for one frame.
 struct Frame<'a> {
     scene: &'a Scene,
+    tex: &'a Textures,
+    offset: [f32; 2],
     objects: Vec<Placed>,
     shadows: Vec<ShadowPolygon>,
     world_from_camera: Matrix3<f64>,
     camera_centre: Vector3<f64>,
-    noise: NoiseTable,
     cone_count: u32,
     fx: f64,
 }
@@ -131,6 +136,7 @@ impl Renderer {
             camera,
             rays,
             fov: FieldOfView::from_border(min, max),
+            textures: std::sync::Arc::new(Textures::new(TEXTURE_KEY)),
         })
     }
 
@@ -197,7 +203,8 @@ impl Renderer {
                     .collect();
                 let mut counts: Vec<(u32, u64)> = Vec::new();
                 for col in 0..w {
-                    let ray = self.ray_at(col as f64, row as f64);
+                    let n = self.rays[row * w + col];
+                    let ray = Vector3::new(f64::from(n[0]), f64::from(n[1]), 1.0);
                     let (colour, id) = frame.cast(
                         &ray,
                         col as i64,
@@ -315,7 +322,7 @@ impl Renderer {
     }
 
     /// Places every solid and shadow for a scene.
-    fn prepare<'a>(&self, scene: &'a Scene) -> Frame<'a> {
+    fn prepare<'a>(&'a self, scene: &'a Scene) -> Frame<'a> {
         let world_from_camera = scene.world_from_camera();
         let world = &scene.world;
         let sun = Vector3::from(world.environment.sun_direction);
@@ -328,7 +335,7 @@ impl Renderer {
                     .iter()
                     .map(|v| camera_from_world * Point3::new(v.x, v.y, 0.0));
                 if let Some(rect) = self.fov.rect_of(&self.camera, in_camera) {
-                    shadows.push(ShadowPolygon { vertices, rect });
+                    shadows.push(ShadowPolygon::new(&vertices, rect));
                 }
             }
         };
@@ -441,7 +448,14 @@ impl Renderer {
             shadows,
             world_from_camera: world_from_camera.rotation.to_rotation_matrix().into_inner(),
             camera_centre: world_from_camera.translation.vector,
-            noise: NoiseTable::new(world.environment.texture_key),
+            tex: &self.textures,
+            offset: {
+                let k = world.environment.texture_key;
+                [
+                    (k & 0xFFFF) as f32 * 0.37,
+                    ((k >> 16) & 0xFFFF) as f32 * 0.37,
+                ]
+            },
             cone_count,
             fx: self.camera.fx_px,
         }
@@ -465,12 +479,12 @@ impl Frame<'_> {
                 continue;
             }
             if let Some(hit) = object.intersect(&d) {
-                if object.id <= self.cone_count {
-                    if let Some(counts) = counts.as_deref_mut() {
-                        match counts.iter_mut().find(|(id, _)| *id == object.id) {
-                            Some(entry) => entry.1 += 1,
-                            None => counts.push((object.id, 1)),
-                        }
+                if object.id <= self.cone_count
+                    && let Some(counts) = counts.as_deref_mut()
+                {
+                    match counts.iter_mut().find(|(id, _)| *id == object.id) {
+                        Some(entry) => entry.1 += 1,
+                        None => counts.push((object.id, 1)),
                     }
                 }
                 if best.as_ref().is_none_or(|(_, b)| hit.t < b.t) {
@@ -509,7 +523,7 @@ impl Frame<'_> {
             let p = self.camera_centre + d * ground_t;
             let distance = ground_t * d.norm();
             let footprint = (distance / self.fx / (-view.z).max(0.05)) as f32;
-            let albedo = materials::ground_albedo(env, &self.noise, p.x, p.y, footprint);
+            let albedo = materials::ground_albedo(env, self.tex, self.offset, p.x, p.y, footprint);
             let point = Point2::new(p.x, p.y);
             let mut lit = 1.0_f64;
             for shadow in shadows {
@@ -520,7 +534,15 @@ impl Frame<'_> {
             let colour = light::shade(env, albedo, &Vector3::z(), &view, lit as f32, 0.0);
             return (light::haze(env, colour, distance), BACKGROUND_ID);
         }
-        (light::sky(env, &self.noise, &view), BACKGROUND_ID)
+        (
+            light::sky(
+                env,
+                self.tex,
+                [self.offset[0] * 1e-3, self.offset[1] * 1e-3],
+                &view,
+            ),
+            BACKGROUND_ID,
+        )
     }
 
     /// Shaded colour of an object hit.
@@ -543,7 +565,7 @@ impl Frame<'_> {
                 cone.class,
                 &model,
                 &cone.appearance,
-                &self.noise,
+                &self.tex.noise,
                 hit.point.z,
                 azimuth,
                 hit.part == Part::Plate,
@@ -570,7 +592,7 @@ impl Frame<'_> {
         }
         let grain = 0.85
             + 0.3
-                * self.noise.value(
+                * self.tex.noise.value(
                     hit.point.x as f32 * 20.0 + 11.0,
                     (hit.point.z + hit.point.y) as f32 * 20.0,
                 );

@@ -5,12 +5,14 @@
 use image::{RgbImage, codecs::jpeg::JpegEncoder};
 use rayon::prelude::*;
 
-use crate::{error::SimError, rng::hash_unit, scene::CameraEffects};
+use crate::{error::SimError, rng::mix64, scene::CameraEffects};
 
 /// Linear -> display curve strength (`1 - exp(-k x)`).
 const TONE_K: f32 = 1.25;
-/// Entries of the display -> sRGB byte table.
-const LUT_SIZE: usize = 4096;
+/// Entries of the linear -> sRGB byte table.
+const LUT_SIZE: usize = 1 << 15;
+/// Table entries per unit of linear radiance (the table covers [0, 8)).
+const LUT_PER_UNIT: f32 = (LUT_SIZE / 8) as f32;
 
 /// Applies the effects to `linear` (row-major, `width` x `height`) and returns the 8-bit image.
 pub fn finish(
@@ -34,9 +36,10 @@ pub fn finish(
             effects.motion_blur_angle_rad,
         );
     }
-    let lut = srgb_lut();
+    let lut = display_lut();
     let (cx, cy) = (0.5 * w as f32, 0.5 * h as f32);
     let inv_r2 = 1.0 / (cx * cx + cy * cy);
+    let noisy = effects.read_noise > 0.0 || effects.shot_noise_gain > 0.0;
     let mut bytes = vec![0_u8; w * h * 3];
     bytes
         .par_chunks_mut(w * 3)
@@ -45,24 +48,30 @@ pub fn finish(
             let dy = row as f32 + 0.5 - cy;
             for col in 0..w {
                 let dx = col as f32 + 0.5 - cx;
-                let vignette = 1.0 - effects.vignetting * (dx * dx + dy * dy) * inv_r2;
+                let gain =
+                    effects.exposure * (1.0 - effects.vignetting * (dx * dx + dy * dy) * inv_r2);
                 let pixel = linear[row * w + col];
+                let hash = if noisy {
+                    mix64(effects.noise_key ^ mix64((row * w + col) as u64))
+                } else {
+                    0
+                };
                 for c in 0..3 {
-                    let mut display =
-                        1.0 - (-TONE_K * pixel[c] * effects.exposure * vignette).exp();
-                    if effects.read_noise > 0.0 || effects.shot_noise_gain > 0.0 {
-                        let sigma = (effects.read_noise * effects.read_noise
-                            + effects.shot_noise_gain * display.max(0.0))
-                        .sqrt();
-                        let index = ((row * w + col) * 3 + c) as u64;
-                        let g = hash_unit(effects.noise_key, index, 1)
-                            + hash_unit(effects.noise_key, index, 2)
-                            + hash_unit(effects.noise_key, index, 3)
+                    let mut value = pixel[c] * gain;
+                    if noisy {
+                        // Sensor noise in linear units: three 7-bit uniforms per channel summed
+                        // (approximately Gaussian, unit variance after scaling).
+                        let bits = hash >> (c * 21);
+                        let g = ((bits & 127) + ((bits >> 7) & 127) + ((bits >> 14) & 127)) as f32
+                            / 127.0
                             - 1.5;
-                        display += sigma * 2.0 * g;
+                        let sigma = (effects.read_noise * effects.read_noise
+                            + effects.shot_noise_gain * value.max(0.0))
+                        .sqrt();
+                        value += sigma * 2.0 * g;
                     }
-                    let i = (display.clamp(0.0, 1.0) * (LUT_SIZE - 1) as f32) as usize;
-                    out[col * 3 + c] = lut[i];
+                    let i = ((value * LUT_PER_UNIT) as usize).min(LUT_SIZE - 1);
+                    out[col * 3 + c] = lut[if value > 0.0 { i } else { 0 }];
                 }
             }
         });
@@ -75,11 +84,11 @@ pub fn finish(
     Ok(image)
 }
 
-/// Display value -> sRGB byte.
-fn srgb_lut() -> Vec<u8> {
+/// Linear radiance -> sRGB byte (tone curve `1 - exp(-k x)`, then the sRGB transfer).
+fn display_lut() -> Vec<u8> {
     (0..LUT_SIZE)
         .map(|i| {
-            let v = i as f32 / (LUT_SIZE - 1) as f32;
+            let v = 1.0 - (-TONE_K * i as f32 / LUT_PER_UNIT).exp();
             let s = if v <= 0.003_130_8 {
                 12.92 * v
             } else {

@@ -156,10 +156,13 @@ impl Track {
         while s < length - 2.5 {
             track.push_pair(s, ConeClass::Blue, ConeClass::Yellow);
             let radius = track.radius_at(s).min(1e3);
-            // Spacing along the centreline such that the outer edge stays under the limit.
-            let limit = MAX_CONE_SPACING_M / (1.0 + 0.5 * width_m / radius);
-            let wanted = (1.5 + 0.3 * radius).min(limit);
-            s += (wanted * rng.random_range(0.85..1.0)).max(1.5);
+            let wanted = (1.5 + 0.3 * radius) * rng.random_range(0.85..1.0);
+            // Shrink the step until both edges stay under the spacing limit.
+            let mut step = wanted.clamp(1.5, MAX_CONE_SPACING_M);
+            while step > 1.0 && track.edge_gap_m(s, s + step) > 0.97 * MAX_CONE_SPACING_M {
+                step *= 0.9;
+            }
+            s += step;
         }
         track
     }
@@ -179,6 +182,20 @@ impl Track {
             class: right,
             position_m: pose.position_m - normal_left * half,
         });
+    }
+
+    /// Largest distance between the left (or right) edge points at `s0_m` and `s1_m`.
+    fn edge_gap_m(&self, s0_m: f64, s1_m: f64) -> f64 {
+        let edge = |s: f64, side: f64| {
+            self.pose_at(s).map(|p| {
+                let left = Vector2::new(-p.heading_rad.sin(), p.heading_rad.cos());
+                p.position_m + left * (side * 0.5 * self.width_m)
+            })
+        };
+        [1.0, -1.0]
+            .iter()
+            .filter_map(|side| Some((edge(s1_m, *side)? - edge(s0_m, *side)?).norm()))
+            .fold(0.0, f64::max)
     }
 
     /// Radius of curvature of the centreline near `s_m`, metres (large on straights).
@@ -325,7 +342,7 @@ mod tests {
             .map(|a| {
                 cones
                     .iter()
-                    .filter(|b| !std::ptr::eq(*a, *b))
+                    .filter(|b| b.position_m != a.position_m)
                     .map(|b| (a.position_m - b.position_m).norm())
                     .fold(f64::INFINITY, f64::min)
             })
