@@ -23,13 +23,14 @@ from conesight_train.models.output import KeypointOutput
 
 # Smallest sigma the head can report, pixels (keeps 1 / sigma^2 finite).
 SIGMA_FLOOR_PX = 0.05
+# Patch pixels per heatmap cell (two stride-2 layers: stem and stage 1).
+HEATMAP_STRIDE_PX = 4.0
 
 
 @dataclass(frozen=True)
 class HeatmapNetParams:
     """Widths of the production network (defaults are the shipped configuration)."""
 
-    patch_size_px: int = 80
     stem_channels: int = 16
     stage_channels: tuple[int, int, int] = (32, 64, 64)
     decoder_channels: int = 32
@@ -70,7 +71,7 @@ class HeatmapKeypointNet(nn.Module):
         self.fuse = ConvBNReLU(d, d)
         self.heads = nn.Conv2d(d, KEYPOINT_COUNT, 1)
         self.sigma_head = nn.Linear(c3, KEYPOINT_COUNT)
-        self.stride_px = 4.0 * p.patch_size_px / 80.0
+        self.stride_px = HEATMAP_STRIDE_PX
         init_weights(self)
 
     def forward(self, x: torch.Tensor) -> KeypointOutput:
