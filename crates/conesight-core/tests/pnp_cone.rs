@@ -277,3 +277,39 @@ fn predicted_keypoints_reproduce_the_input_and_range_is_the_distance() {
     let truth_m = pose.translation.vector.norm();
     assert!((estimate.range_m() - truth_m).abs() < 1e-9);
 }
+
+#[test]
+fn two_wild_keypoints_go_through_the_leave_one_out_search() {
+    let camera = Camera::paper_default();
+    let model = ConeModel::small();
+    let extrinsics = Extrinsics::paper_default();
+    let params = ConePnpParams::for_keypoint_sigma(0.5).with_extrinsics(&extrinsics, false);
+    let solver = ConeSolver::new(&camera, &model, &params).unwrap();
+    let mut failures = Vec::new();
+    let mut cases = 0;
+    for (ahead_m, lateral_m) in [(4.0, 0.5), (9.0, -2.0), (16.0, 3.0)] {
+        let pose = camera_from_cone(&extrinsics, ahead_m, lateral_m, 0.4);
+        let truth = Point3::from(pose.translation.vector);
+        let clean = silhouette_keypoints(&camera, &model, &pose).unwrap();
+        for first in 0..KEYPOINT_COUNT {
+            for second in (first + 1)..KEYPOINT_COUNT {
+                cases += 1;
+                let mut keypoints = clean;
+                keypoints[first].x += 22.0;
+                keypoints[second].y -= 17.0;
+                let estimate = solver.solve(&ConeObservation::new(keypoints)).unwrap();
+                let error_m = (estimate.position_in_camera - truth).norm();
+                let expected: [bool; KEYPOINT_COUNT] =
+                    std::array::from_fn(|k| k != first && k != second);
+                if estimate.inliers != expected || error_m > 1e-3 {
+                    failures.push((ahead_m, first, second, error_m, estimate.inliers));
+                }
+            }
+        }
+    }
+    assert!(
+        failures.is_empty(),
+        "{} of {cases} failed: {failures:?}",
+        failures.len()
+    );
+}

@@ -15,8 +15,9 @@
 //!    the outlier threshold (3 sigma by default) that is the answer.
 //! 4. Otherwise Gauss-Newton IRLS with a robust loss (Cauchy by default) from the closed-form
 //!    start exposes outliers; keypoints with residual above `outlier_threshold_px` are
-//!    dropped; if more than one is flagged or the refit is inconsistent, a leave-one-out
-//!    search over the 7 subsets picks the best; then least squares on the inliers.
+//!    dropped; if more than one is flagged or the refit is inconsistent, a subset search
+//!    (leave one out: 7 subsets; if none fits, leave two out: 21; ...) picks the best; then
+//!    least squares on the inliers.
 //! 5. Covariance `(J^T W J)^-1 sigma^2` at the least squares solution.
 
 use nalgebra::{Matrix3, Point2, Point3, Rotation3, UnitQuaternion, Vector2, Vector3};
@@ -164,7 +165,7 @@ impl ConeSolver {
                 }
             }
             if !final_fit_done {
-                let (best, n) = self.leave_one_out(fit, &measurements, &used)?;
+                let (best, n) = self.leave_out_search(fit, &measurements, &used)?;
                 iterations += n;
                 fit = best;
                 inliers = self.classify(&fit.lin, &used);
@@ -252,40 +253,56 @@ impl ConeSolver {
         })
     }
 
-    /// Least squares on each subset leaving one used keypoint out; keeps the subset with the
-    /// smallest cost.
-    fn leave_one_out(
+    /// Subset search: for m = 1, 2, ... (while at least `min_inliers` keypoints remain), least
+    /// squares on every subset of the used keypoints that leaves m out; the cheapest subset of
+    /// the smallest m whose own residuals are all within the outlier threshold wins. Without
+    /// such a subset, the cheapest subset of the largest m is returned.
+    fn leave_out_search(
         &self,
         start: Fit,
         measurements: &Measurements,
         used: &[bool; KEYPOINT_COUNT],
     ) -> Result<(Fit, usize), GeometryError> {
-        let mut best: Option<(f64, Fit)> = None;
+        let used_mask = (0..KEYPOINT_COUNT)
+            .filter(|k| used[*k])
+            .fold(0_u32, |mask, k| mask | (1 << k));
+        let used_count = used_mask.count_ones() as usize;
+        let max_left_out = used_count.saturating_sub(self.params.min_inliers);
         let mut iterations = 0;
-        for left_out in 0..KEYPOINT_COUNT {
-            if !used[left_out] {
-                continue;
+        let mut best: Option<(f64, Fit)> = None;
+        for left_out_count in 1..=max_left_out {
+            best = None;
+            for left_out in 0..(1_u32 << KEYPOINT_COUNT) {
+                if left_out.count_ones() as usize != left_out_count || left_out & !used_mask != 0 {
+                    continue;
+                }
+                let subset: [bool; KEYPOINT_COUNT] =
+                    std::array::from_fn(|k| used[k] && left_out & (1 << k) == 0);
+                let Ok((fit, n)) = self.gauss_newton(
+                    start,
+                    measurements,
+                    &subset,
+                    RobustLoss::Squared,
+                    ROBUST_RELATIVE_TOLERANCE,
+                ) else {
+                    continue;
+                };
+                iterations += n;
+                let cost = self.cost(&fit, measurements, &subset, RobustLoss::Squared);
+                if best.as_ref().is_none_or(|(c, _)| cost < *c) {
+                    best = Some((cost, fit));
+                }
             }
-            let mut subset = *used;
-            subset[left_out] = false;
-            let Ok((fit, n)) = self.gauss_newton(
-                start,
-                measurements,
-                &subset,
-                RobustLoss::Squared,
-                ROBUST_RELATIVE_TOLERANCE,
-            ) else {
-                continue;
-            };
-            iterations += n;
-            let cost = self.cost(&fit, measurements, &subset, RobustLoss::Squared);
-            if best.as_ref().is_none_or(|(c, _)| cost < *c) {
-                best = Some((cost, fit));
+            if let Some((_, fit)) = &best {
+                let consistent = self.classify(&fit.lin, used);
+                if count(&consistent) >= used_count - left_out_count {
+                    break;
+                }
             }
         }
         let Some((_, fit)) = best else {
             return Err(GeometryError::SolverFailed {
-                reason: "every leave-one-out subset failed",
+                reason: "every keypoint subset of the outlier search failed",
             });
         };
         Ok((fit, iterations))

@@ -2,11 +2,12 @@
 //!
 //! - The cone solver ([`solve_cone`], or [`ConeSolver`] to reuse the set-up): 7 silhouette
 //!   keypoints of one cone -> its base centre in the camera frame with a 3x3 covariance.
-//!   Exact silhouette model, closed-form start, robust Gauss-Newton, leave-one-out outlier
-//!   search, optional ground plane and tilt. Files: `cone.rs` (solver), `cone_gauss_newton.rs`,
-//!   `params.rs` (inputs and outputs), `cone_init.rs`, `silhouette_jacobian.rs`, `covariance.rs`, `robust.rs`.
+//!   Exact silhouette model, closed-form start, robust Gauss-Newton, leave-m-out outlier
+//!   search, optional ground plane and tilt. Files: `cone.rs` (solver),
+//!   `cone_gauss_newton.rs`, `params.rs` (inputs and outputs), `cone_init.rs`,
+//!   `silhouette_jacobian.rs`, `covariance.rs`, `robust.rs`.
 //! - The generic solver for any rigid point set ([`solve_pnp`], [`solve_pnp_ransac`]):
-//!   EPnP (`epnp.rs`) + Levenberg-Marquardt (`lm.rs`) (`generic.rs`) + RANSAC (`ransac.rs`).
+//!   EPnP (`epnp.rs`) + Levenberg-Marquardt (`lm.rs`), in `generic.rs`; RANSAC in `ransac.rs`.
 
 mod cone;
 mod cone_gauss_newton;
