@@ -108,7 +108,7 @@ def _neighbour(patch: np.ndarray, other: np.ndarray, rng: np.random.Generator) -
     return out
 
 
-def _photometric(image: np.ndarray, rng: np.random.Generator, p: AugmentParams) -> np.ndarray:
+def photometric(image: np.ndarray, rng: np.random.Generator, p: AugmentParams) -> np.ndarray:
     x = image.astype(np.float32)
     if rng.random() < p.p_colour:
         gain = rng.uniform(*p.colour_gain_range, size=3).astype(np.float32)
@@ -162,5 +162,5 @@ class PhotoAugment:
             patch = _neighbour(patch, np.asarray(other), rng)
         if rng.random() < p.p_truncate:
             patch = _truncate(patch, rng, p)
-        patch = _photometric(patch, rng, p)
+        patch = photometric(patch, rng, p)
         return KeypointPatch(patch, keypoints.astype(np.float32))
