@@ -153,8 +153,8 @@ pub fn shade(
     let sun = Vector3::from(env.sun_direction);
     let cos = n.dot(&sun).max(0.0) as f32 * lit;
     let sky = (0.65 + 0.35 * n.z) as f32;
-    let half = (sun - view).normalize();
     let spec = if cos > 0.0 && gloss > 0.0 {
+        let half = (sun - view).normalize();
         gloss * (n.dot(&half).max(0.0) as f32).powi(48)
     } else {
         0.0
@@ -218,7 +218,7 @@ pub fn sky(env: &Environment, tex: &Textures, offset: [f32; 2], d: &Vector3<f64>
 
 /// Blends a surface colour towards the horizon haze with distance.
 pub fn haze(env: &Environment, colour: [f32; 3], distance_m: f64) -> [f32; 3] {
-    let f = (1.0 - (-distance_m / HAZE_DISTANCE_M).exp()) as f32;
+    let f = 1.0 - (-(distance_m / HAZE_DISTANCE_M) as f32).exp();
     [0, 1, 2].map(|c| colour[c] + (env.sky_horizon_rgb[c] - colour[c]) * f)
 }
 

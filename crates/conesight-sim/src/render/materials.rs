@@ -125,7 +125,8 @@ pub fn ground_albedo(
     if env.ground == GroundKind::Concrete {
         // Slab joints every 5 m.
         let joint = |c: f32| {
-            let d = (c / 5.0 - (c / 5.0).round()).abs() * 5.0;
+            let q = c / 5.0 + 0.5;
+            let d = (q - q.floor() - 0.5).abs() * 5.0;
             d < 0.012_f32.max(0.5 * footprint_m)
         };
         if joint(x_m as f32) || joint(y_m as f32) {
@@ -178,5 +179,6 @@ fn distance_to_segment(px: f64, py: f64, ax: f64, ay: f64, bx: f64, by: f64) -> 
     } else {
         0.0
     };
-    (px - ax - t * vx).hypot(py - ay - t * vy)
+    let (ex, ey) = (px - ax - t * vx, py - ay - t * vy);
+    (ex * ex + ey * ey).sqrt()
 }

@@ -39,6 +39,10 @@ const SUBSAMPLES: [(f64, f64); 4] = [
     (0.375, 0.125),
     (-0.125, 0.375),
 ];
+/// Width of the column tiles that bin objects and shadows per row, pixels.
+const TILE_PX: usize = 32;
+/// Objects and shadows that may cover the pixels of one column tile.
+type Tile<'a> = (Vec<&'a Placed>, Vec<&'a ShadowPolygon>);
 /// Object id of the ground and the sky.
 pub const BACKGROUND_ID: u32 = 0;
 
@@ -75,6 +79,11 @@ pub struct Rendered {
     pub object_ids: Vec<u32>,
     /// Per-cone coverage, indexed like `scene.world.cones`.
     pub coverage: Vec<Coverage>,
+}
+
+/// Number of column tiles of an image row.
+fn tiles_len(width: usize) -> usize {
+    width.div_ceil(TILE_PX)
 }
 
 /// Everything a ray needs for one frame.
@@ -191,26 +200,18 @@ impl Renderer {
             .zip(ids.par_chunks_mut(w))
             .enumerate()
             .map(|(row, (colours, row_ids))| {
-                let active: Vec<&Placed> = frame
-                    .objects
-                    .iter()
-                    .filter(|o| o.rect[1] <= row as i64 && o.rect[3] >= row as i64)
-                    .collect();
-                let shadows: Vec<&ShadowPolygon> = frame
-                    .shadows
-                    .iter()
-                    .filter(|s| s.rect[1] <= row as i64 && s.rect[3] >= row as i64)
-                    .collect();
+                let tiles = frame.row_tiles(row as i64, row as i64, w);
                 let mut counts: Vec<(u32, u64)> = Vec::new();
                 for col in 0..w {
                     let n = self.rays[row * w + col];
                     let ray = Vector3::new(f64::from(n[0]), f64::from(n[1]), 1.0);
+                    let (active, shadows) = &tiles[col / TILE_PX];
                     let (colour, id) = frame.cast(
                         &ray,
                         col as i64,
                         row as i64,
-                        &active,
-                        &shadows,
+                        active,
+                        shadows,
                         Some(&mut counts),
                     );
                     colours[col] = colour;
@@ -225,16 +226,7 @@ impl Renderer {
             .par_chunks_mut(w)
             .enumerate()
             .for_each(|(row, colours)| {
-                let active: Vec<&Placed> = frame
-                    .objects
-                    .iter()
-                    .filter(|o| o.rect[1] <= row as i64 + 1 && o.rect[3] >= row as i64 - 1)
-                    .collect();
-                let shadows: Vec<&ShadowPolygon> = frame
-                    .shadows
-                    .iter()
-                    .filter(|s| s.rect[1] <= row as i64 + 1 && s.rect[3] >= row as i64 - 1)
-                    .collect();
+                let tiles = frame.row_tiles(row as i64 - 1, row as i64 + 1, w);
                 for col in 0..w {
                     let id = ids_ref[row * w + col];
                     let differs = (col + 1 < w && ids_ref[row * w + col + 1] != id)
@@ -244,11 +236,12 @@ impl Renderer {
                     if !differs {
                         continue;
                     }
+                    let (active, shadows) = &tiles[col / TILE_PX];
                     let mut sum = [0.0_f32; 3];
                     for (dx, dy) in SUBSAMPLES {
                         let ray = self.ray_at(col as f64 + dx, row as f64 + dy);
                         let (colour, _) =
-                            frame.cast(&ray, col as i64, row as i64, &active, &shadows, None);
+                            frame.cast(&ray, col as i64, row as i64, active, shadows, None);
                         sum = [sum[0] + colour[0], sum[1] + colour[1], sum[2] + colour[2]];
                     }
                     colours[col] = sum.map(|s| s * 0.25);
@@ -304,9 +297,8 @@ impl Renderer {
                     .iter()
                     .filter(|o| o.covers(col, row))
                     .collect();
-                let d = Vector3::new(n.x, n.y, 1.0);
+                let dw = frame.world_from_camera * Vector3::new(n.x, n.y, 1.0);
                 let ground_t = {
-                    let dw = frame.world_from_camera * d;
                     if dw.z < -1e-12 {
                         -frame.camera_centre.z / dw.z
                     } else {
@@ -314,7 +306,7 @@ impl Renderer {
                     }
                 };
                 frame
-                    .nearest(&d, col, row, &active, None)
+                    .nearest(&dw, col, row, &active, None)
                     .filter(|(_, hit)| hit.t < ground_t)
                     .map_or(BACKGROUND_ID, |(o, _)| o.id)
             })
@@ -463,22 +455,51 @@ impl Renderer {
 }
 
 impl Frame<'_> {
+    /// Per column tile of rows `row_min..=row_max`, the objects and shadows whose rectangles
+    /// reach it.
+    fn row_tiles(&self, row_min: i64, row_max: i64, width: usize) -> Vec<Tile<'_>> {
+        let mut tiles: Vec<Tile<'_>> = (0..width.div_ceil(TILE_PX))
+            .map(|_| (Vec::new(), Vec::new()))
+            .collect();
+        let span = |rect: &[i64; 4]| {
+            (rect[1] <= row_max && rect[3] >= row_min).then(|| {
+                (rect[0].max(0) as usize / TILE_PX)
+                    ..=((rect[2].max(0) as usize / TILE_PX).min(tiles_len(width) - 1))
+            })
+        };
+        for object in &self.objects {
+            if let Some(range) = span(&object.rect) {
+                for tile in range {
+                    tiles[tile].0.push(object);
+                }
+            }
+        }
+        for shadow in &self.shadows {
+            if let Some(range) = span(&shadow.rect) {
+                for tile in range {
+                    tiles[tile].1.push(shadow);
+                }
+            }
+        }
+        tiles
+    }
+
     /// Nearest object hit along a camera-frame ray; counts unoccluded cone hits.
     fn nearest<'p>(
         &self,
-        ray_camera: &Vector3<f64>,
+        ray_world: &Vector3<f64>,
         col: i64,
         row: i64,
         active: &[&'p Placed],
         mut counts: Option<&mut Vec<(u32, u64)>>,
     ) -> Option<(&'p Placed, raycast::Hit)> {
-        let d = self.world_from_camera * ray_camera;
+        let d = ray_world;
         let mut best: Option<(&Placed, raycast::Hit)> = None;
         for object in active {
             if !object.covers(col, row) {
                 continue;
             }
-            if let Some(hit) = object.intersect(&d) {
+            if let Some(hit) = object.intersect(d) {
                 if object.id <= self.cone_count
                     && let Some(counts) = counts.as_deref_mut()
                 {
@@ -513,7 +534,7 @@ impl Frame<'_> {
         } else {
             f64::INFINITY
         };
-        let hit = self.nearest(ray_camera, col, row, active, counts);
+        let hit = self.nearest(&d, col, row, active, counts);
         if let Some((object, hit)) = hit.filter(|(_, h)| h.t < ground_t) {
             let normal = object.world_from_local * hit.normal;
             let colour = self.object_colour(object, &hit, &normal, &view);

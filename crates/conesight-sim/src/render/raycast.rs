@@ -368,7 +368,7 @@ fn intersect_frustum(
         if point.z < z0 || point.z > z1 || radius < 0.0 {
             continue;
         }
-        let rho = point.x.hypot(point.y).max(1e-12);
+        let rho = (point.x * point.x + point.y * point.y).sqrt().max(1e-12);
         let normal = Vector3::new(point.x / rho, point.y / rho, -k).normalize();
         return Some(Hit {
             t,
