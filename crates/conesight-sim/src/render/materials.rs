@@ -8,9 +8,10 @@ use crate::scene::{ConeAppearance, Environment, GroundKind};
 /// Linear albedo of a cone's main colour and its stripe colour.
 pub fn cone_colours(class: ConeClass) -> ([f32; 3], [f32; 3]) {
     match class {
-        ConeClass::Blue => ([0.012, 0.04, 0.30], [0.62, 0.62, 0.6]),
-        ConeClass::Yellow => ([0.62, 0.42, 0.012], [0.025, 0.025, 0.025]),
-        ConeClass::Orange | ConeClass::LargeOrange => ([0.72, 0.13, 0.012], [0.62, 0.62, 0.6]),
+        // Tuned against real FSOCO crops (bright, saturated plastic; see docs/mosaic.png).
+        ConeClass::Blue => ([0.008, 0.11, 0.5], [0.8, 0.8, 0.78]),
+        ConeClass::Yellow => ([0.78, 0.52, 0.01], [0.02, 0.02, 0.02]),
+        ConeClass::Orange | ConeClass::LargeOrange => ([0.82, 0.1, 0.016], [0.8, 0.8, 0.78]),
     }
 }
 

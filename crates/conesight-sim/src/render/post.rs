@@ -8,7 +8,7 @@ use rayon::prelude::*;
 use crate::{error::SimError, rng::mix64, scene::CameraEffects};
 
 /// Linear -> display curve strength (`1 - exp(-k x)`).
-const TONE_K: f32 = 1.25;
+const TONE_K: f32 = 1.6;
 /// Entries of the linear -> sRGB byte table.
 const LUT_SIZE: usize = 1 << 15;
 /// Table entries per unit of linear radiance (the table covers [0, 8)).
