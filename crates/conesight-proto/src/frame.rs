@@ -1,0 +1,232 @@
+//! Image frames: raw RGB8/BGR8 or JPEG, checked against their dimensions.
+
+use std::io::Cursor;
+
+use bytes::Bytes;
+use image::{ImageFormat, ImageReader, Limits, RgbImage};
+
+use crate::error::ProtoError;
+use crate::limits::{MAX_IMAGE_SIDE_PX, RAW_BYTES_PER_PIXEL};
+use crate::pb::{self, ImageEncoding};
+
+/// Largest allocation the JPEG decoder may make: one RGB8 image at the largest side, plus slack.
+const JPEG_MAX_ALLOC_BYTES: u64 =
+    (MAX_IMAGE_SIDE_PX as u64) * (MAX_IMAGE_SIDE_PX as u64) * 4 + (1 << 20);
+
+impl pb::ImageFrame {
+    /// A raw RGB8 frame holding a copy of `image`.
+    pub fn from_rgb(header: pb::Header, image: &RgbImage) -> Self {
+        Self {
+            header: Some(header),
+            width_px: image.width(),
+            height_px: image.height(),
+            encoding: ImageEncoding::Rgb8.into(),
+            data: Bytes::copy_from_slice(image.as_raw()),
+        }
+    }
+
+    /// A JPEG frame of `image` at `quality` (1..=100), for frames that cross hosts.
+    pub fn from_rgb_jpeg(
+        header: pb::Header,
+        image: &RgbImage,
+        quality: u8,
+    ) -> Result<Self, ProtoError> {
+        let mut jpeg = Vec::new();
+        image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpeg, quality.clamp(1, 100))
+            .encode_image(image)
+            .map_err(|e| ProtoError::Jpeg {
+                operation: "encode",
+                reason: e.to_string(),
+            })?;
+        Ok(Self {
+            header: Some(header),
+            width_px: image.width(),
+            height_px: image.height(),
+            encoding: ImageEncoding::Jpeg.into(),
+            data: Bytes::from(jpeg),
+        })
+    }
+
+    /// Checks the dimensions (1..=[`MAX_IMAGE_SIDE_PX`]), the encoding and, for raw encodings,
+    /// that the data is exactly `width * height * 3` bytes. Does not decode JPEG.
+    pub fn validate(&self) -> Result<ImageEncoding, ProtoError> {
+        for (field, side) in [("width_px", self.width_px), ("height_px", self.height_px)] {
+            if side == 0 || side > MAX_IMAGE_SIDE_PX {
+                return Err(ProtoError::OutOfRange {
+                    field: field.to_owned(),
+                    value: f64::from(side),
+                    min: 1.0,
+                    max: f64::from(MAX_IMAGE_SIDE_PX),
+                });
+            }
+        }
+        let encoding = match ImageEncoding::try_from(self.encoding) {
+            Ok(ImageEncoding::Unspecified) | Err(_) => {
+                return Err(ProtoError::UnknownEnum {
+                    field: "encoding".to_owned(),
+                    value: self.encoding,
+                });
+            }
+            Ok(encoding) => encoding,
+        };
+        if encoding == ImageEncoding::Jpeg {
+            if self.data.is_empty() {
+                return Err(ProtoError::Jpeg {
+                    operation: "decode",
+                    reason: "no data".to_owned(),
+                });
+            }
+            return Ok(encoding);
+        }
+        let expected_bytes = self.width_px as usize * self.height_px as usize * RAW_BYTES_PER_PIXEL;
+        if self.data.len() != expected_bytes {
+            return Err(ProtoError::ImageSize {
+                width_px: self.width_px,
+                height_px: self.height_px,
+                expected_bytes,
+                actual_bytes: self.data.len(),
+            });
+        }
+        Ok(encoding)
+    }
+
+    /// The frame as an RGB8 image (BGR swapped, JPEG decoded with allocation limits); a JPEG
+    /// whose own size differs from `width_px` x `height_px` is rejected.
+    pub fn to_rgb(&self) -> Result<RgbImage, ProtoError> {
+        let encoding = self.validate()?;
+        let size_mismatch = |actual_bytes| ProtoError::ImageSize {
+            width_px: self.width_px,
+            height_px: self.height_px,
+            expected_bytes: self.width_px as usize * self.height_px as usize * RAW_BYTES_PER_PIXEL,
+            actual_bytes,
+        };
+        match encoding {
+            ImageEncoding::Rgb8 | ImageEncoding::Unspecified => {
+                RgbImage::from_raw(self.width_px, self.height_px, self.data.to_vec())
+                    .ok_or_else(|| size_mismatch(self.data.len()))
+            }
+            ImageEncoding::Bgr8 => {
+                let mut pixels = self.data.to_vec();
+                for pixel in pixels.chunks_exact_mut(RAW_BYTES_PER_PIXEL) {
+                    pixel.swap(0, 2);
+                }
+                RgbImage::from_raw(self.width_px, self.height_px, pixels)
+                    .ok_or_else(|| size_mismatch(self.data.len()))
+            }
+            ImageEncoding::Jpeg => {
+                let image = decode_jpeg(&self.data)?;
+                if (image.width(), image.height()) != (self.width_px, self.height_px) {
+                    return Err(size_mismatch(image.as_raw().len()));
+                }
+                Ok(image)
+            }
+        }
+    }
+}
+
+/// Decodes a JPEG to RGB8 with the decoder's dimension and allocation limits set.
+fn decode_jpeg(data: &[u8]) -> Result<RgbImage, ProtoError> {
+    let jpeg_error = |e: image::ImageError| ProtoError::Jpeg {
+        operation: "decode",
+        reason: e.to_string(),
+    };
+    let mut reader = ImageReader::with_format(Cursor::new(data), ImageFormat::Jpeg);
+    let mut limits = Limits::default();
+    limits.max_image_width = Some(MAX_IMAGE_SIDE_PX);
+    limits.max_image_height = Some(MAX_IMAGE_SIDE_PX);
+    limits.max_alloc = Some(JPEG_MAX_ALLOC_BYTES);
+    reader.limits(limits);
+    Ok(reader.decode().map_err(jpeg_error)?.into_rgb8())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use prost::Message;
+
+    fn gradient(width: u32, height: u32) -> RgbImage {
+        RgbImage::from_fn(width, height, |x, y| {
+            image::Rgb([(x * 7) as u8, (y * 5) as u8, ((x + y) * 3) as u8])
+        })
+    }
+
+    fn header() -> pb::Header {
+        pb::Header::new("front", 1, 2, "front_optical")
+    }
+
+    #[test]
+    fn raw_rgb_round_trips_through_bytes() {
+        let image = gradient(33, 17);
+        let frame = pb::ImageFrame::from_rgb(header(), &image);
+        let decoded = pb::ImageFrame::decode(frame.encode_to_vec().as_slice()).unwrap();
+        assert_eq!(decoded.to_rgb().unwrap(), image);
+    }
+
+    #[test]
+    fn bgr_is_swapped_to_rgb() {
+        let mut frame = pb::ImageFrame::from_rgb(header(), &gradient(4, 3));
+        frame.encoding = ImageEncoding::Bgr8.into();
+        let rgb = frame.to_rgb().unwrap();
+        assert_eq!(rgb.get_pixel(1, 2).0, {
+            let p = gradient(4, 3).get_pixel(1, 2).0;
+            [p[2], p[1], p[0]]
+        });
+    }
+
+    #[test]
+    fn jpeg_round_trip_is_close_and_size_checked() {
+        let image = gradient(64, 48);
+        let frame = pb::ImageFrame::from_rgb_jpeg(header(), &image, 95).unwrap();
+        assert!(frame.data.len() < image.as_raw().len());
+        let decoded = frame.to_rgb().unwrap();
+        let mean_abs_error = decoded
+            .as_raw()
+            .iter()
+            .zip(image.as_raw())
+            .map(|(a, b)| f64::from(a.abs_diff(*b)))
+            .sum::<f64>()
+            / image.as_raw().len() as f64;
+        assert!(mean_abs_error < 4.0, "mean error {mean_abs_error}");
+
+        let mut lying = frame.clone();
+        lying.width_px = 65;
+        assert!(matches!(
+            lying.to_rgb(),
+            Err(ProtoError::ImageSize { width_px: 65, .. })
+        ));
+        let mut corrupt = frame;
+        corrupt.data = Bytes::from_static(b"\xff\xd8\xff garbage");
+        assert_eq!(corrupt.to_rgb().unwrap_err().kind(), "jpeg");
+    }
+
+    #[test]
+    fn wrong_size_unknown_encoding_and_oversize_are_errors() {
+        let mut frame = pb::ImageFrame::from_rgb(header(), &gradient(8, 8));
+        frame.height_px = 9;
+        assert_eq!(
+            frame.validate(),
+            Err(ProtoError::ImageSize {
+                width_px: 8,
+                height_px: 9,
+                expected_bytes: 216,
+                actual_bytes: 192
+            })
+        );
+        frame.height_px = 8;
+        frame.encoding = 42;
+        assert!(matches!(
+            frame.validate(),
+            Err(ProtoError::UnknownEnum { value: 42, .. })
+        ));
+        frame.encoding = 0;
+        assert!(frame.validate().is_err());
+        frame.encoding = ImageEncoding::Rgb8.into();
+        frame.width_px = MAX_IMAGE_SIDE_PX + 1;
+        assert!(matches!(
+            frame.validate(),
+            Err(ProtoError::OutOfRange { ref field, .. }) if field == "width_px"
+        ));
+        frame.width_px = 0;
+        assert!(frame.validate().is_err());
+    }
+}
