@@ -36,17 +36,21 @@ def rendered_sample(tmp_path: Path) -> Path:
     )
 
 
-def test_python_crop_reproduces_the_renderer_patches(tmp_path):
-    root = rendered_sample(tmp_path)
+@pytest.fixture(scope="module")
+def sample_root(tmp_path_factory) -> Path:
+    return rendered_sample(tmp_path_factory.mktemp("render"))
+
+
+def test_python_crop_reproduces_the_renderer_patches(sample_root):
+    root = sample_root
     report = patch_parity(root, limit=200)
     assert report.patches > 0
     assert report.max_transform_diff < 1e-9
     assert report.max_pixel_diff == 0, report
 
 
-def test_renderer_patches_read_as_a_training_source(tmp_path):
-    root = rendered_sample(tmp_path)
-    patches = SimPatches(root)
+def test_renderer_patches_read_as_a_training_source(sample_root):
+    patches = SimPatches(sample_root)
     assert len(patches) > 0
     for i in range(len(patches)):
         sample = patches[i]
