@@ -6,8 +6,9 @@ crop rule's fill, as when a cone leaves the image), a neighbouring cone pasted a
 Photometric: per-channel colour gain and offset, gamma, Gaussian or motion blur, sensor noise,
 JPEG re-compression. Every draw comes from the Generator passed in, so results are seeded.
 
-Box jitter done here re-samples the patch, so context outside it is replicated from the
-border; jittering the box in the full image at render time is better where available.
+Box jitter done here re-samples the patch, so context outside it is mirrored from inside
+(BORDER_REFLECT_101); jittering the box in the full image at render time
+(`conesight sim --patch-jitter`) is better where available.
 """
 
 from __future__ import annotations
@@ -25,7 +26,9 @@ from conesight_train.keypoints import MIRROR_PERMUTATION
 class AugmentParams:
     """Probabilities and ranges of each augmentation (defaults: the training configuration)."""
 
-    scale_range: tuple[float, float] = (0.9, 1.1)
+    # Down to 0.7: the real FSOCO crops, taken as boxes, show cones at 0.75x the size rendered
+    # tight boxes give (apex-to-base 47 px vs 64 px in the 80x80 patch, medians).
+    scale_range: tuple[float, float] = (0.7, 1.15)
     shift_fraction: float = 0.06  # of the patch side, each axis
     p_geometric: float = 0.8
     p_mirror: float = 0.5
@@ -60,7 +63,7 @@ def _geometric(
         ]
     )
     out = cv2.warpAffine(
-        patch, matrix, (n, n), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE
+        patch, matrix, (n, n), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT_101
     )
     moved = keypoints * scale + matrix[:, 2]
     return out, moved
