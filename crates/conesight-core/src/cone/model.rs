@@ -29,8 +29,12 @@ pub struct ConeModel {
     pub stripes: &'static [(f64, f64)],
 }
 
-/// Small cone (228 x 228 x 325 mm). Keypoint heights from the paper (Cr3D = 1.39408);
-/// radii fitted to real labels (see `tools/fit_cone_model.py` and [`ConeModel::small`]).
+/// Small cone (228 x 228 x 325 mm): blue, yellow and small orange.
+///
+/// Keypoint heights are the paper's (stripe edges 112.8 mm and 212.2 mm, top 325 mm, base 0;
+/// Cr3D = 1.39408, see `cross_ratio.rs`). The base keypoint is on the ground plane (h = 0) to
+/// keep that cross-ratio; the body really meets the plate `plate_height_m` higher, which moves
+/// the labelled point by under 0.1 px at 8 m.
 const SMALL: ConeModel = ConeModel::tapered(
     0.114,
     0.005,
@@ -40,18 +44,40 @@ const SMALL: ConeModel = ConeModel::tapered(
     &[(0.1128, 0.2122)],
 );
 
-/// Body radius of the small cone at the base keypoint (fitted).
-const SMALL_BASE_RADIUS_M: f64 = 0.0748;
-/// Radius of the small cone's truncated top (fitted).
-const SMALL_TOP_RADIUS_M: f64 = 0.0215;
+// The fitted numbers. Real labels mark the body, not the base plate: over the 1,919 real FSOCO
+// (AMZ) crops with an apex-to-base height of at least 40 px, the median left-right distance over
+// the apex-to-base height is 0.4600 at the base, 0.3366 at the lower stripe edge and 0.2404 at
+// the upper stripe edge (a straight taper from the plate's 0.114 m half width would give
+// 0.70 / 0.46 / 0.24). `tools/fit_cone_model.py` fits the two parameters of a straight-tapered
+// truncated body (radius at the base and at the top) by least squares so that the exact
+// silhouette keypoints, seen from the typical view (camera 1.0 m high, level, cone 8 m
+// ahead), reproduce those three medians. Result: projected ratios 0.4579 / 0.3411 / 0.2381,
+// i.e. -0.5 %, +1.3 %, -1.0 % against the labels (a straight side cannot fit all three
+// exactly); the same at 3 to 15 m straight ahead. A cone 2 m to the side at 8 m projects about
+// 3 % wider (pinhole stretch off-axis), so the labels' view mix and any non-uniform resizing of
+// the crops are the main uncertainty (a few per cent on the radii).
+// The test `tests/real_cone_labels.rs` recomputes the medians and checks the model against them.
+
+/// Body radius of the small cone at the base keypoint (fitted, see above).
+const SMALL_BASE_RADIUS_M: f64 = 0.0744;
+/// Radius of the small cone's truncated top (fitted, see above).
+const SMALL_TOP_RADIUS_M: f64 = 0.0197;
 
 /// Height scale of the large cone relative to the small one (505 / 325).
 const LARGE_HEIGHT_SCALE: f64 = 0.505 / 0.325;
 /// Width scale of the large cone relative to the small one (plate 285 / 228).
 const LARGE_WIDTH_SCALE: f64 = 0.285 / 0.228;
 
-/// Large orange cone (285 x 285 x 505 mm): the small cone's keypoint heights scaled by
-/// 505/325 and its radii by 285/228, so its side cross-ratio equals the small cone's.
+/// Large orange cone (285 x 285 x 505 mm).
+///
+/// Assumption (no large cones are identifiable in the real labels): the large cone is the small
+/// cone scaled by 505/325 in height and by 285/228 (the plate ratio) in width. So its keypoint
+/// heights are 0, 175.3, 329.7 and 505 mm, its side cross-ratio equals the small cone's
+/// (1.39387; scaling heights preserves ratios of distances), and its body radii are 0.0930 m at
+/// the base and 0.0246 m at the top. Per the FSG rules it has two white stripes; the keypoints
+/// are the outer edges of the striped zone (bottom of the lower stripe, top of the upper one),
+/// and the two stripes split that zone with a gap of about 1/6 of it (an assumption for the
+/// renderer, not a measured value).
 const LARGE: ConeModel = ConeModel::tapered(
     0.1425,
     0.006,
@@ -64,8 +90,8 @@ const LARGE: ConeModel = ConeModel::tapered(
     SMALL_BASE_RADIUS_M * LARGE_WIDTH_SCALE,
     SMALL_TOP_RADIUS_M * LARGE_WIDTH_SCALE,
     &[
-        (0.1128 * LARGE_HEIGHT_SCALE, 0.16 * LARGE_HEIGHT_SCALE),
-        (0.165 * LARGE_HEIGHT_SCALE, 0.2122 * LARGE_HEIGHT_SCALE),
+        (0.1128 * LARGE_HEIGHT_SCALE, 0.1542 * LARGE_HEIGHT_SCALE),
+        (0.1708 * LARGE_HEIGHT_SCALE, 0.2122 * LARGE_HEIGHT_SCALE),
     ],
 );
 
