@@ -1,0 +1,146 @@
+"""Detection metrics: AP at IoU 0.5 per class (all-point interpolation, VOC 2010+ / COCO style),
+their mean, precision and recall at the operating threshold, and recall by distance band.
+
+Matching: per image and class, detections best score first; each takes the unmatched truth of
+its class with the highest IoU >= iou_threshold. Difficult truths (VOC style) are matched too,
+but neither they nor the detections they take count anywhere.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from conesight_train.detector.postprocess import iou_one_to_many
+
+DISTANCE_BANDS_M: tuple[tuple[float, float], ...] = (
+    (0.0, 10.0),
+    (10.0, 20.0),
+    (20.0, 30.0),
+    (30.0, float("inf")),
+)
+
+# The target's "cones within 20 m".
+NEAR_RANGE_M = 20.0
+
+
+@dataclass(frozen=True)
+class ImageResult:
+    """Detections [D, 6] (box, score, class) and truths: boxes [T, 4], classes [T], range_m [T]."""
+
+    detections: np.ndarray
+    truth_boxes: np.ndarray
+    truth_classes: np.ndarray
+    truth_range_m: np.ndarray
+    truth_difficult: np.ndarray | None = None
+
+    def difficult(self) -> np.ndarray:
+        """Bool [T]."""
+        if self.truth_difficult is None:
+            return np.zeros(len(self.truth_boxes), bool)
+        return self.truth_difficult
+
+
+def match(image: ImageResult, iou_threshold: float) -> tuple[np.ndarray, np.ndarray]:
+    """(detection is a true positive [D] bool, truth matched by detection at rank [T] or -1)."""
+    dets = image.detections
+    order = np.argsort(-dets[:, 4], kind="stable")
+    hit = np.zeros(len(dets), bool)
+    matched_by = np.full(len(image.truth_boxes), -1, np.int64)
+    for rank in order:
+        same = np.nonzero(image.truth_classes == int(dets[rank, 5]))[0]
+        free = same[matched_by[same] < 0]
+        if len(free) == 0:
+            continue
+        overlaps = iou_one_to_many(dets[rank, :4], image.truth_boxes[free])
+        best = int(np.argmax(overlaps))
+        if overlaps[best] >= iou_threshold:
+            hit[rank] = True
+            matched_by[free[best]] = rank
+    return hit, matched_by
+
+
+def average_precision(scores: np.ndarray, hits: np.ndarray, truth_count: int) -> float:
+    """AP from every detection's score and hit flag; NaN without truths."""
+    if truth_count == 0:
+        return float("nan")
+    order = np.argsort(-scores, kind="stable")
+    tp = np.cumsum(hits[order])
+    recall = np.concatenate([[0.0], tp / truth_count, [1.0]])
+    precision = np.concatenate([[1.0], tp / np.arange(1, len(order) + 1), [0.0]])
+    precision = np.maximum.accumulate(precision[::-1])[::-1]
+    steps = np.nonzero(recall[1:] != recall[:-1])[0]
+    return float(np.sum((recall[steps + 1] - recall[steps]) * precision[steps + 1]))
+
+
+def evaluate(
+    images: list[ImageResult],
+    class_names: tuple[str, ...],
+    score_threshold: float,
+    iou_threshold: float = 0.5,
+) -> dict[str, object]:
+    """AP per class and mAP over classes with truths; P/R at `score_threshold`; recall by
+    distance band (truths with a finite range), all at `iou_threshold`."""
+    per_class: dict[str, dict[str, float]] = {}
+    scores_by_class: list[list[np.ndarray]] = [[] for _ in class_names]
+    hits_by_class: list[list[np.ndarray]] = [[] for _ in class_names]
+    truths_by_class = np.zeros(len(class_names), np.int64)
+    band_found = np.zeros(len(DISTANCE_BANDS_M), np.int64)
+    band_total = np.zeros(len(DISTANCE_BANDS_M), np.int64)
+    tp = fp = fn = 0
+    near_found = near_total = 0
+    for image in images:
+        hits, matched_by = match(image, iou_threshold)
+        hard = image.difficult()
+        # Detections that took a difficult truth count nowhere.
+        counted = np.ones(len(image.detections), bool)
+        counted[matched_by[(matched_by >= 0) & hard]] = False
+        for c in range(len(class_names)):
+            sel = (image.detections[:, 5] == c) & counted
+            scores_by_class[c].append(image.detections[sel, 4])
+            hits_by_class[c].append(hits[sel])
+            truths_by_class[c] += int(np.sum((image.truth_classes == c) & ~hard))
+        above = (image.detections[:, 4] >= score_threshold) & counted
+        tp += int(np.sum(hits & above))
+        fp += int(np.sum(~hits & above))
+        found = np.zeros(len(image.truth_boxes), bool)
+        ok = matched_by >= 0
+        found[ok] = image.detections[matched_by[ok], 4] >= score_threshold
+        found |= hard
+        fn += int(np.sum(~found))
+        ranges = np.where(hard, np.nan, image.truth_range_m)
+        near = ranges < NEAR_RANGE_M
+        near_total += int(np.sum(near))
+        near_found += int(np.sum(found & near))
+        for b, (lo, hi) in enumerate(DISTANCE_BANDS_M):
+            in_band = (ranges >= lo) & (ranges < hi)
+            band_total[b] += int(np.sum(in_band))
+            band_found[b] += int(np.sum(found & in_band))
+    aps = []
+    for c, name in enumerate(class_names):
+        ap = average_precision(
+            np.concatenate(scores_by_class[c]) if scores_by_class[c] else np.zeros(0),
+            np.concatenate(hits_by_class[c]) if hits_by_class[c] else np.zeros(0, bool),
+            int(truths_by_class[c]),
+        )
+        per_class[name] = {"ap50": ap, "truths": int(truths_by_class[c])}
+        if not np.isnan(ap):
+            aps.append(ap)
+    bands = {
+        (f"{lo:g}-{hi:g} m" if np.isfinite(hi) else f">= {lo:g} m"): {
+            "truths": int(band_total[b]),
+            "recall": float(band_found[b] / band_total[b]) if band_total[b] else float("nan"),
+        }
+        for b, (lo, hi) in enumerate(DISTANCE_BANDS_M)
+    }
+    return {
+        "map50": float(np.mean(aps)) if aps else float("nan"),
+        "precision": tp / (tp + fp) if tp + fp else float("nan"),
+        "recall": tp / (tp + fn) if tp + fn else float("nan"),
+        "score_threshold": score_threshold,
+        "iou_threshold": iou_threshold,
+        "per_class": per_class,
+        "recall_by_range": bands,
+        "recall_within_20m": near_found / near_total if near_total else float("nan"),
+    }

@@ -1,0 +1,152 @@
+"""ONNX export of the detector (opset 17, `ExportHead` output), the ONNX Runtime vs PyTorch
+check, and the model card (`NAME.card.json`, read by crates/conesight-detect).
+
+    python -m conesight_train.detector.onnx_export --checkpoint build/train/detector/best.pt \
+        --out models/detector.onnx [--metrics eval.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import onnxruntime as ort
+import torch
+
+from conesight_train.detector.band import BandParams
+from conesight_train.detector.model import CLASS_NAMES, ConeDetector, ExportHead
+
+INPUT_NAME = "image"
+OUTPUT_NAME = "detections"
+OPSET = 17
+MAX_MODEL_BYTES = 20_000_000
+# Export check: boxes in input pixels, scores in [0, 1] (observed ~1e-5 and ~1e-7).
+BOX_TOLERANCE_PX = 1e-2
+SCORE_TOLERANCE = 1e-4
+
+
+def export_onnx(model: ConeDetector, path: str | Path, band: BandParams) -> None:
+    """Writes the eval-mode detector with its decoding head; batch size 1, fixed input size."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    head = ExportHead(model).eval()
+    dummy = torch.zeros(1, 3, band.input_height_px, band.input_width_px)
+    torch.onnx.export(
+        head,
+        (dummy,),
+        str(path),
+        input_names=[INPUT_NAME],
+        output_names=[OUTPUT_NAME],
+        opset_version=OPSET,
+        dynamo=False,
+    )
+
+
+@dataclass(frozen=True)
+class Parity:
+    """ONNX Runtime vs PyTorch on the same inputs.
+
+    Scores are zero except at 3x3 peaks, and on a near-flat heatmap (an untrained network) a
+    last-bit difference can move a peak to the neighbouring cell: such cells are counted in
+    `peak_flips` (and left out of `max_score_diff`) instead of failing the comparison.
+    """
+
+    max_box_diff_px: float
+    max_score_diff: float
+    peak_flips: int
+    cells: int
+
+
+def compare_with_pytorch(model: ConeDetector, path: str | Path, inputs: np.ndarray) -> Parity:
+    """Runs both on float32 inputs [N, 3, H, W] and compares the `detections` outputs."""
+    head = ExportHead(model).eval()
+    sess = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    box_diff = score_diff = 0.0
+    flips = cells = 0
+    for x in inputs:
+        with torch.no_grad():
+            expected = head(torch.from_numpy(x[None])).numpy()[0]
+        (actual,) = sess.run(None, {INPUT_NAME: x[None]})
+        if actual.shape[1:] != expected.shape:
+            raise ValueError(f"{path}: output shape {actual.shape}, PyTorch {expected.shape}")
+        actual = actual[0]
+        box_diff = max(box_diff, float(np.max(np.abs(actual[:4] - expected[:4]))))
+        a, e = actual[4:], expected[4:]
+        flipped = (a > 0) != (e > 0)
+        flips += int(np.sum(flipped))
+        cells += a.size
+        both = ~flipped
+        if np.any(both):
+            score_diff = max(score_diff, float(np.max(np.abs(a[both] - e[both]))))
+    return Parity(box_diff, score_diff, flips, cells)
+
+
+def model_card(
+    path: Path, config_dict: dict[str, object], parity: Parity, metrics: dict[str, object] | None
+) -> dict[str, object]:
+    """The card written next to the model (read by crates/conesight-detect)."""
+    band = config_dict["band"]
+    return {
+        "format": "conesight-detector-card-v1",
+        "model": path.name,
+        "sha256": hashlib.sha256(path.read_bytes()).hexdigest(),
+        "bytes": path.stat().st_size,
+        "layout": "conesight_band",
+        "input": {
+            "name": INPUT_NAME,
+            "shape": [1, 3, band["input_height_px"], band["input_width_px"]],  # type: ignore[index]
+            "dtype": "float32",
+            "values": "RGB, raw 0..255 (normalised inside the graph)",
+        },
+        "output": {
+            "name": OUTPUT_NAME,
+            "shape": "[1, 4 + classes, cells]",
+            "values": "cx, cy, w, h in continuous input pixels, then per-class scores "
+            "(sigmoid at 3x3 heatmap peaks, 0 elsewhere)",
+        },
+        "preprocessing": "band rows [top, top + factor * input_height) of the frame, top = "
+        "band_top_px clamped into the frame, each input pixel the mean of a factor x factor "
+        "block; frame width must be factor * input_width",
+        "band": band,
+        "class_names": list(CLASS_NAMES),
+        "thresholds": config_dict["thresholds"],
+        "opset": OPSET,
+        "parity": asdict(parity),
+        "metrics": metrics,
+    }
+
+
+def main(argv: list[str] | None = None) -> None:
+    """CLI: checkpoint -> ONNX + NAME.card.json, with the ONNX Runtime parity check."""
+    parser = argparse.ArgumentParser(description="Export the cone detector to ONNX")
+    parser.add_argument("--checkpoint", type=Path, required=True)
+    parser.add_argument("--out", type=Path, default=Path("models/detector.onnx"))
+    parser.add_argument("--metrics", type=Path, help="evaluation JSON to copy into the card")
+    args = parser.parse_args(argv)
+    from conesight_train.detector.train import model_from_checkpoint
+
+    model, config, _ = model_from_checkpoint(args.checkpoint)
+    export_onnx(model, args.out, config.band)
+    size = args.out.stat().st_size
+    if size > MAX_MODEL_BYTES:
+        raise SystemExit(f"{args.out}: {size} bytes, over the {MAX_MODEL_BYTES} byte budget")
+    rng = np.random.default_rng(0)
+    inputs = rng.uniform(
+        0, 255, (2, 3, config.band.input_height_px, config.band.input_width_px)
+    ).astype(np.float32)
+    parity = compare_with_pytorch(model, args.out, inputs)
+    if parity.max_box_diff_px > BOX_TOLERANCE_PX or parity.max_score_diff > SCORE_TOLERANCE:
+        raise SystemExit(f"{args.out}: ONNX Runtime disagrees with PyTorch: {parity}")
+    metrics = json.loads(args.metrics.read_text()) if args.metrics else None
+    card = model_card(args.out, config.to_dict(), parity, metrics)
+    card_path = args.out.with_suffix(".card.json")
+    card_path.write_text(json.dumps(card, indent=2) + "\n")
+    print(f"wrote {args.out} ({size / 1e6:.2f} MB) and {card_path}; parity {parity}")
+
+
+if __name__ == "__main__":
+    main()

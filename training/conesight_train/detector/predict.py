@@ -1,0 +1,53 @@
+"""Run the PyTorch detector on frames: band input -> export-layout output -> decoded
+detections in continuous frame pixels (the same rule as the Rust runtime)."""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from conesight_train.detector.augment import to_input
+from conesight_train.detector.band import BandParams
+from conesight_train.detector.data import FrameSource
+from conesight_train.detector.metrics import ImageResult
+from conesight_train.detector.model import ConeDetector, ExportHead
+from conesight_train.detector.postprocess import Thresholds, decode
+
+
+def detections_in_frame(
+    output: np.ndarray, band: BandParams, top_px: int, thresholds: Thresholds
+) -> np.ndarray:
+    """Output [4 + C, N] of one band -> detections [D, 6] in continuous frame pixels."""
+    dets = decode(output, thresholds)
+    dets[:, :4] *= band.factor
+    dets[:, [1, 3]] += top_px
+    return dets
+
+
+def predict_frames(
+    model: ConeDetector,
+    source: FrameSource,
+    band: BandParams,
+    thresholds: Thresholds,
+    batch_size: int = 4,
+) -> list[ImageResult]:
+    """Detections and truths (frame pixels) for every frame of `source`."""
+    head = ExportHead(model).eval()
+    results: list[ImageResult] = []
+    for start in range(0, len(source), batch_size):
+        frames = [source[i] for i in range(start, min(start + batch_size, len(source)))]
+        inputs = np.stack([to_input(f, band).image for f in frames])
+        with torch.no_grad():
+            outputs = head(torch.from_numpy(inputs)).numpy()
+        for frame, output in zip(frames, outputs, strict=True):
+            top = band.top_for(frame.image_rgb.shape[0])
+            results.append(
+                ImageResult(
+                    detections_in_frame(output, band, top, thresholds),
+                    frame.boxes_px,
+                    frame.classes,
+                    frame.range_m,
+                    frame.difficult_mask(),
+                )
+            )
+    return results

@@ -1,0 +1,91 @@
+"""Detection metrics and NMS on hand-made cases."""
+
+import numpy as np
+import pytest
+
+from conesight_train.detector.metrics import ImageResult, average_precision, evaluate
+from conesight_train.detector.postprocess import Thresholds, decode
+
+NAMES = ("blue", "yellow", "orange", "large_orange")
+
+
+def image(dets, truths, classes, ranges=None):
+    truths = np.array(truths, float).reshape(-1, 4)
+    return ImageResult(
+        np.array(dets, float).reshape(-1, 6),
+        truths,
+        np.array(classes, int),
+        np.full(len(truths), np.nan) if ranges is None else np.array(ranges, float),
+    )
+
+
+def test_perfect_detections_score_one():
+    img = image(
+        [[0, 0, 10, 20, 0.9, 0], [50, 0, 60, 20, 0.8, 1]], [[0, 0, 10, 20], [50, 0, 60, 20]], [0, 1]
+    )
+    m = evaluate([img], NAMES, 0.5)
+    assert m["map50"] == 1.0 and m["precision"] == 1.0 and m["recall"] == 1.0
+    assert np.isnan(m["per_class"]["orange"]["ap50"])  # no truths: not in the mean
+
+
+def test_ap_by_hand():
+    # Scores: TP 0.9, FP 0.8, TP 0.7; 3 truths. Precision envelope: 1 up to R=1/3, 2/3 up to 2/3.
+    hits = np.array([True, False, True])
+    ap = average_precision(np.array([0.9, 0.8, 0.7]), hits, 3)
+    assert ap == pytest.approx(1 / 3 * 1.0 + 1 / 3 * 2 / 3)
+
+
+def test_wrong_class_and_duplicates_are_false_positives():
+    truths = [[0, 0, 10, 20]]
+    dets = [[0, 0, 10, 20, 0.9, 1], [0, 0, 10, 20, 0.8, 0], [1, 0, 10, 20, 0.7, 0]]
+    m = evaluate([image(dets, truths, [0])], NAMES, 0.5)
+    assert m["precision"] == pytest.approx(1 / 3) and m["recall"] == 1.0
+    assert m["per_class"]["blue"]["ap50"] == 1.0  # the best-scored blue is the hit
+
+
+def test_iou_threshold_and_ranges():
+    truths = [[0, 0, 10, 20], [100, 0, 104, 10]]
+    # The second detection overlaps its truth with IoU 0.4 < 0.5: a miss and a false positive.
+    dets = [[0, 0, 10, 20, 0.9, 0], [100, 0, 104, 4, 0.9, 0]]
+    m = evaluate([image(dets, truths, [0, 0], [5.0, 25.0])], NAMES, 0.5)
+    assert m["recall"] == 0.5
+    assert m["recall_by_range"]["0-10 m"] == {"truths": 1, "recall": 1.0}
+    assert m["recall_by_range"]["20-30 m"] == {"truths": 1, "recall": 0.0}
+    assert m["recall_within_20m"] == 1.0
+
+
+def test_below_threshold_counts_for_ap_not_for_recall():
+    m = evaluate([image([[0, 0, 10, 20, 0.2, 0]], [[0, 0, 10, 20]], [0])], NAMES, 0.5)
+    assert m["map50"] == 1.0 and m["recall"] == 0.0
+
+
+def test_class_aware_nms():
+    # Columns: cx, cy, w, h, then 4 class scores.
+    out = np.array(
+        [
+            [10, 10, 10, 20, 0.9, 0, 0, 0],
+            [11, 10, 10, 20, 0.8, 0, 0, 0],  # same class, IoU 0.82: suppressed
+            [11, 10, 10, 20, 0, 0.7, 0, 0],  # other class: kept
+            [40, 10, 10, 20, 0.6, 0, 0, 0],  # far: kept
+            [80, 10, 10, 20, 0.1, 0, 0, 0],  # below threshold
+        ],
+        float,
+    ).T
+    dets = decode(out, Thresholds(score_threshold=0.3, nms_iou=0.5))
+    assert dets[:, 4].tolist() == pytest.approx([0.9, 0.7, 0.6])
+    assert dets[:, 5].tolist() == [0, 1, 0]
+    np.testing.assert_allclose(dets[0, :4], [5, 0, 15, 20])
+    assert len(decode(out, Thresholds(score_threshold=0.3, max_detections=2))) == 2
+
+
+def test_difficult_truths_count_nowhere():
+    truths = np.array([[0, 0, 10, 20], [50, 0, 52, 3]], float)
+    dets = np.array([[0, 0, 10, 20, 0.9, 0], [50, 0, 52, 3, 0.8, 0]], float)
+    hard = np.array([False, True])
+    img = ImageResult(dets, truths, np.array([0, 0]), np.array([5.0, 5.0]), hard)
+    m = evaluate([img], NAMES, 0.5)
+    assert m["precision"] == 1.0 and m["recall"] == 1.0
+    assert m["per_class"]["blue"]["truths"] == 1
+    # Missing the difficult cone costs nothing either.
+    img = ImageResult(dets[:1], truths, np.array([0, 0]), np.array([5.0, 5.0]), hard)
+    assert evaluate([img], NAMES, 0.5)["recall_by_range"]["0-10 m"]["truths"] == 1

@@ -1,0 +1,81 @@
+"""Detector training: a few steps on toy frames lower the loss, resume continues the same run,
+and the ONNX export matches PyTorch."""
+
+import numpy as np
+import torch
+
+from conesight_train.detector.band import BandParams
+from conesight_train.detector.config import TrainConfig
+from conesight_train.detector.data import ToyFrames
+from conesight_train.detector.dataset import DetectorDataset
+from conesight_train.detector.loss import detector_loss
+from conesight_train.detector.model import ConeDetector, DetectorParams, multiply_accumulates
+from conesight_train.detector.onnx_export import compare_with_pytorch, export_onnx
+from conesight_train.detector.train import load_checkpoint, train
+
+SMALL_BAND = BandParams(band_top_px=32, input_width_px=128, input_height_px=64, factor=2)
+TINY = DetectorParams(
+    stem_channels=8, stage_channels=(16, 16, 24, 32), stage_blocks=(1, 1, 1, 1), neck_channels=16
+)
+
+
+def test_a_few_steps_lower_the_loss_on_a_fixed_batch():
+    torch.manual_seed(0)
+    torch.set_num_threads(1)
+    data = DetectorDataset(ToyFrames(8, seed=1), SMALL_BAND)
+    images = torch.stack([data[i][0] for i in range(8)])
+    targets = {k: torch.stack([data[i][1][k] for i in range(8)]) for k in data[0][1]}
+    model = ConeDetector(TINY)
+    optimizer = torch.optim.Adam(model.parameters(), lr=3e-3)
+    losses = []
+    for _ in range(30):
+        loss = detector_loss(*model(images), targets)
+        optimizer.zero_grad()
+        loss.total.backward()
+        optimizer.step()
+        losses.append(float(loss.total))
+    assert np.mean(losses[-5:]) < 0.5 * np.mean(losses[:3]), losses
+
+
+def test_training_run_checkpoints_and_resumes(tmp_path):
+    config = TrainConfig(
+        train="toy:16",
+        val="toy:4:9",
+        out=str(tmp_path),
+        steps=6,
+        batch_size=4,
+        val_every=3,
+        warmup_steps=2,
+        band=SMALL_BAND,
+        model=TINY,
+    )
+    summary = train(config, progress=False)
+    assert summary["steps"] == 6 and len(summary["history"]) == 6
+    first = load_checkpoint(tmp_path / "last.pt")
+    assert first["step"] == 6 and "map50" in first["metrics"]
+    config.steps = 8
+    resumed = train(config, resume=True, progress=False)
+    assert resumed["steps"] == 8
+    assert resumed["history"][:6] == summary["history"]  # the old history is kept, not redone
+
+
+def test_onnx_export_matches_pytorch(tmp_path):
+    torch.manual_seed(0)
+    model = ConeDetector(TINY).eval()
+    # Non-trivial batch-norm statistics, so the check covers them.
+    for m in model.modules():
+        if isinstance(m, torch.nn.BatchNorm2d):
+            m.running_mean.uniform_(-0.5, 0.5)
+            m.running_var.uniform_(0.5, 2.0)
+    path = tmp_path / "det.onnx"
+    export_onnx(model, path, SMALL_BAND)
+    inputs = np.random.default_rng(0).uniform(0, 255, (2, 3, 64, 128)).astype(np.float32)
+    parity = compare_with_pytorch(model, path, inputs)
+    assert parity.max_box_diff_px < 1e-3 and parity.max_score_diff < 1e-5, parity
+    assert parity.peak_flips <= 1e-3 * parity.cells, parity
+    assert path.stat().st_size < 20e6
+
+
+def test_default_network_is_light():
+    macs = multiply_accumulates(ConeDetector(), (320, 960))
+    assert 50e6 < macs < 1e9
