@@ -39,6 +39,8 @@ const SUBSAMPLES: [(f64, f64); 4] = [
     (0.375, 0.125),
     (-0.125, 0.375),
 ];
+/// Spacing of the background (ground and sky) shading grid, pixels.
+const BACKGROUND_STEP: usize = 2;
 /// Width of the column tiles that bin objects and shadows per row, pixels.
 const TILE_PX: usize = 32;
 /// Objects and shadows that may cover the pixels of one column tile.
@@ -194,7 +196,26 @@ impl Renderer {
         let mut linear = vec![[0.0_f32; 3]; w * h];
         let mut ids = vec![BACKGROUND_ID; w * h];
         let cone_count = frame.cone_count as usize;
-        // Pass 1: one sample per pixel; count unoccluded cone hits per row.
+        // Pass 0: ground and sky radiance on a grid of every BACKGROUND_STEP pixels (they vary
+        // slowly; objects are always shaded per pixel, edges re-sampled in pass 2).
+        let grid_w = (w - 1) / BACKGROUND_STEP + 2;
+        let grid_h = (h - 1) / BACKGROUND_STEP + 2;
+        let grid: Vec<[f32; 3]> = (0..grid_h)
+            .into_par_iter()
+            .flat_map_iter(|gy| {
+                let row = (gy * BACKGROUND_STEP).min(h - 1);
+                let tiles = frame.row_tiles(row as i64, row as i64, w);
+                let frame = &frame;
+                (0..grid_w).map(move |gx| {
+                    let col = (gx * BACKGROUND_STEP).min(w - 1);
+                    let n = self.rays[row * w + col];
+                    let ray = Vector3::new(f64::from(n[0]), f64::from(n[1]), 1.0);
+                    frame.background(&ray, col as i64, &tiles[col / TILE_PX].1)
+                })
+            })
+            .collect();
+        // Pass 1: objects per pixel, background interpolated from the grid; count unoccluded
+        // cone hits per row.
         let unoccluded: Vec<Vec<(u32, u64)>> = linear
             .par_chunks_mut(w)
             .zip(ids.par_chunks_mut(w))
@@ -202,20 +223,34 @@ impl Renderer {
             .map(|(row, (colours, row_ids))| {
                 let tiles = frame.row_tiles(row as i64, row as i64, w);
                 let mut counts: Vec<(u32, u64)> = Vec::new();
+                let gy = row / BACKGROUND_STEP;
+                let fy = (row % BACKGROUND_STEP) as f32 / BACKGROUND_STEP as f32;
                 for col in 0..w {
+                    let (active, _) = &tiles[col / TILE_PX];
                     let n = self.rays[row * w + col];
                     let ray = Vector3::new(f64::from(n[0]), f64::from(n[1]), 1.0);
-                    let (active, shadows) = &tiles[col / TILE_PX];
-                    let (colour, id) = frame.cast(
-                        &ray,
-                        col as i64,
-                        row as i64,
-                        active,
-                        shadows,
-                        Some(&mut counts),
+                    if let Some((colour, id)) =
+                        frame.object_hit(&ray, col as i64, row as i64, active, Some(&mut counts))
+                    {
+                        colours[col] = colour;
+                        row_ids[col] = id;
+                        continue;
+                    }
+                    let gx = col / BACKGROUND_STEP;
+                    let fx = (col % BACKGROUND_STEP) as f32 / BACKGROUND_STEP as f32;
+                    let at = |x: usize, y: usize| grid[y * grid_w + x];
+                    let (a, b, c, d) = (
+                        at(gx, gy),
+                        at(gx + 1, gy),
+                        at(gx, gy + 1),
+                        at(gx + 1, gy + 1),
                     );
-                    colours[col] = colour;
-                    row_ids[col] = id;
+                    colours[col] = [0, 1, 2].map(|k| {
+                        let top = a[k] + (b[k] - a[k]) * fx;
+                        let bottom = c[k] + (d[k] - c[k]) * fx;
+                        top + (bottom - top) * fy
+                    });
+                    row_ids[col] = BACKGROUND_ID;
                 }
                 counts
             })
@@ -526,21 +561,53 @@ impl Frame<'_> {
         shadows: &[&ShadowPolygon],
         counts: Option<&mut Vec<(u32, u64)>>,
     ) -> ([f32; 3], u32) {
+        match self.object_hit(ray_camera, col, row, active, counts) {
+            Some(hit) => hit,
+            None => (self.background(ray_camera, col, shadows), BACKGROUND_ID),
+        }
+    }
+
+    /// Colour and id of the nearest object along a camera-frame ray, when one lies in front of
+    /// the ground.
+    fn object_hit(
+        &self,
+        ray_camera: &Vector3<f64>,
+        col: i64,
+        row: i64,
+        active: &[&Placed],
+        counts: Option<&mut Vec<(u32, u64)>>,
+    ) -> Option<([f32; 3], u32)> {
+        if active.is_empty() {
+            return None;
+        }
         let env = &self.scene.world.environment;
         let d = self.world_from_camera * ray_camera;
-        let view = d.normalize();
         let ground_t = if d.z < -1e-12 {
             -self.camera_centre.z / d.z
         } else {
             f64::INFINITY
         };
-        let hit = self.nearest(&d, col, row, active, counts);
-        if let Some((object, hit)) = hit.filter(|(_, h)| h.t < ground_t) {
-            let normal = object.world_from_local * hit.normal;
-            let colour = self.object_colour(object, &hit, &normal, &view);
-            return (light::haze(env, colour, hit.t * d.norm()), object.id);
-        }
-        if ground_t.is_finite() {
+        let (object, hit) = self
+            .nearest(&d, col, row, active, counts)
+            .filter(|(_, h)| h.t < ground_t)?;
+        let view = d.normalize();
+        let normal = object.world_from_local * hit.normal;
+        let colour = self.object_colour(object, &hit, &normal, &view);
+        Some((light::haze(env, colour, hit.t * d.norm()), object.id))
+    }
+
+    /// Radiance of the ground (with shadows) or the sky along a camera-frame ray.
+    fn background(
+        &self,
+        ray_camera: &Vector3<f64>,
+        col: i64,
+        shadows: &[&ShadowPolygon],
+    ) -> [f32; 3] {
+        let env = &self.scene.world.environment;
+        let d = self.world_from_camera * ray_camera;
+        let view = d.normalize();
+        if d.z < -1e-12 {
+            let ground_t = -self.camera_centre.z / d.z;
             let p = self.camera_centre + d * ground_t;
             let distance = ground_t * d.norm();
             let footprint = (distance / self.fx / (-view.z).max(0.05)) as f32;
@@ -553,16 +620,13 @@ impl Frame<'_> {
                 }
             }
             let colour = light::shade(env, albedo, &Vector3::z(), &view, lit as f32, 0.0);
-            return (light::haze(env, colour, distance), BACKGROUND_ID);
+            return light::haze(env, colour, distance);
         }
-        (
-            light::sky(
-                env,
-                self.tex,
-                [self.offset[0] * 1e-3, self.offset[1] * 1e-3],
-                &view,
-            ),
-            BACKGROUND_ID,
+        light::sky(
+            env,
+            self.tex,
+            [self.offset[0] * 1e-3, self.offset[1] * 1e-3],
+            &view,
         )
     }
 
