@@ -1,1 +1,481 @@
-//! ROS `camera_info` YAML loading. Filled in by the camera-config work.
+//! ROS `camera_info` YAML, as written by ROS `camera_calibration` (and read by
+//! `camera_info_manager`):
+//!
+//! ```yaml
+//! image_width: 1920
+//! image_height: 1200
+//! camera_name: front
+//! camera_matrix: {rows: 3, cols: 3, data: [fx, 0, cx, 0, fy, cy, 0, 0, 1]}
+//! distortion_model: plumb_bob
+//! distortion_coefficients: {rows: 1, cols: 5, data: [k1, k2, p1, p2, k3]}
+//! rectification_matrix: {rows: 3, cols: 3, data: [1, 0, 0, 0, 1, 0, 0, 0, 1]}
+//! projection_matrix: {rows: 3, cols: 4, data: [fx, 0, cx, 0, 0, fy, cy, 0, 0, 0, 1, 0]}
+//! ```
+//!
+//! Supported distortion models: `plumb_bob` (5 coefficients, or 4 with k3 = 0),
+//! `rational_polynomial` (8 coefficients, accepted only when k4..k6 are zero, since the camera
+//! model is `plumb_bob`) and `none`. The rectification and projection matrices are optional and
+//! only checked for shape (a monocular camera ignores them).
+//!
+//! The YAML helpers here are shared with the extrinsics loader.
+
+use std::path::Path;
+
+use serde_yaml::{Mapping, Value};
+
+use super::{Camera, Distortion};
+use crate::error::ConfigError;
+
+/// What a camera_info file should look like, for YAML syntax errors.
+const CAMERA_INFO_HINT: &str = "a ROS camera_info YAML mapping with image_width, image_height, \
+     camera_matrix {rows: 3, cols: 3, data: [9 numbers]}, distortion_model (plumb_bob) and \
+     distortion_coefficients {rows: 1, cols: 5, data: [k1, k2, p1, p2, k3]}";
+
+/// Tolerance on the fixed entries of the camera matrix (skew, bottom row).
+const CAMERA_MATRIX_FIXED_TOLERANCE: f64 = 1e-9;
+
+/// Parses YAML text into a mapping, naming `what` and the expected form on failure.
+pub(super) fn parse_mapping(
+    text: &str,
+    what: &str,
+    hint: &'static str,
+) -> Result<Mapping, ConfigError> {
+    let value: Value = serde_yaml::from_str(text).map_err(|error| ConfigError::Yaml {
+        what: what.to_owned(),
+        message: error.to_string(),
+        hint,
+    })?;
+    match value {
+        Value::Mapping(mapping) => Ok(mapping),
+        other => Err(ConfigError::Yaml {
+            what: what.to_owned(),
+            message: format!("the document is a {}, not a mapping", kind(&other)),
+            hint,
+        }),
+    }
+}
+
+/// A short name for the kind of a YAML value.
+fn kind(value: &Value) -> &'static str {
+    match value {
+        Value::Null => "null",
+        Value::Bool(_) => "boolean",
+        Value::Number(_) => "number",
+        Value::String(_) => "string",
+        Value::Sequence(_) => "list",
+        Value::Mapping(_) => "mapping",
+        Value::Tagged(_) => "tagged value",
+    }
+}
+
+/// Builds a [`ConfigError::Field`].
+pub(super) fn field_error(
+    what: &str,
+    field: &'static str,
+    problem: impl Into<String>,
+    expected: &'static str,
+) -> ConfigError {
+    ConfigError::Field {
+        what: what.to_owned(),
+        field,
+        problem: problem.into(),
+        expected,
+    }
+}
+
+/// The value under `key`, or a "missing" error naming `field`.
+pub(super) fn required<'a>(
+    mapping: &'a Mapping,
+    key: &str,
+    what: &str,
+    field: &'static str,
+    expected: &'static str,
+) -> Result<&'a Value, ConfigError> {
+    mapping
+        .get(key)
+        .ok_or_else(|| field_error(what, field, "is missing", expected))
+}
+
+/// A finite number.
+pub(super) fn number(
+    value: &Value,
+    what: &str,
+    field: &'static str,
+    expected: &'static str,
+) -> Result<f64, ConfigError> {
+    match value.as_f64() {
+        Some(number) if number.is_finite() => Ok(number),
+        Some(number) => Err(field_error(what, field, format!("is {number}"), expected)),
+        None => Err(field_error(
+            what,
+            field,
+            format!("is a {}, not a number", kind(value)),
+            expected,
+        )),
+    }
+}
+
+/// A list of finite numbers, optionally of an exact length.
+pub(super) fn numbers(
+    value: &Value,
+    length: Option<usize>,
+    what: &str,
+    field: &'static str,
+    expected: &'static str,
+) -> Result<Vec<f64>, ConfigError> {
+    let Value::Sequence(items) = value else {
+        return Err(field_error(
+            what,
+            field,
+            format!("is a {}, not a list", kind(value)),
+            expected,
+        ));
+    };
+    if let Some(length) = length
+        && items.len() != length
+    {
+        return Err(field_error(
+            what,
+            field,
+            format!("has {} entries instead of {length}", items.len()),
+            expected,
+        ));
+    }
+    items
+        .iter()
+        .map(|item| number(item, what, field, expected))
+        .collect()
+}
+
+/// A positive integer that fits in u32.
+fn positive_u32(
+    value: &Value,
+    what: &str,
+    field: &'static str,
+    expected: &'static str,
+) -> Result<u32, ConfigError> {
+    match value.as_u64().map(u32::try_from) {
+        Some(Ok(number)) if number > 0 => Ok(number),
+        _ => Err(field_error(
+            what,
+            field,
+            format!("is {}", describe(value)),
+            expected,
+        )),
+    }
+}
+
+/// A value for an error message: the number itself, or its kind.
+fn describe(value: &Value) -> String {
+    match value {
+        Value::Number(number) => number.to_string(),
+        Value::String(text) => format!("the string `{text}`"),
+        other => format!("a {}", kind(other)),
+    }
+}
+
+/// The names of one matrix's fields, for error messages.
+struct MatrixFields {
+    key: &'static str,
+    rows: &'static str,
+    cols: &'static str,
+    data: &'static str,
+    expected: &'static str,
+}
+
+const CAMERA_MATRIX: MatrixFields = MatrixFields {
+    key: "camera_matrix",
+    rows: "camera_matrix.rows",
+    cols: "camera_matrix.cols",
+    data: "camera_matrix.data",
+    expected: "{rows: 3, cols: 3, data: [fx, 0, cx, 0, fy, cy, 0, 0, 1]} with fx, fy > 0 and \
+               (cx, cy) inside the image",
+};
+const DISTORTION: MatrixFields = MatrixFields {
+    key: "distortion_coefficients",
+    rows: "distortion_coefficients.rows",
+    cols: "distortion_coefficients.cols",
+    data: "distortion_coefficients.data",
+    expected: "{rows: 1, cols: 5, data: [k1, k2, p1, p2, k3]} for plumb_bob (4 coefficients mean \
+               k3 = 0; rational_polynomial's 8 only with k4 = k5 = k6 = 0)",
+};
+const RECTIFICATION: MatrixFields = MatrixFields {
+    key: "rectification_matrix",
+    rows: "rectification_matrix.rows",
+    cols: "rectification_matrix.cols",
+    data: "rectification_matrix.data",
+    expected: "{rows: 3, cols: 3, data: [9 numbers]} (identity for a monocular camera)",
+};
+const PROJECTION: MatrixFields = MatrixFields {
+    key: "projection_matrix",
+    rows: "projection_matrix.rows",
+    cols: "projection_matrix.cols",
+    data: "projection_matrix.data",
+    expected: "{rows: 3, cols: 4, data: [12 numbers]}",
+};
+
+/// Reads `{rows, cols, data}` and checks `rows * cols == data.len()` and, when given, the shape.
+fn matrix(
+    mapping: &Mapping,
+    fields: &MatrixFields,
+    shape: Option<(u64, u64)>,
+    what: &str,
+) -> Result<(u64, u64, Vec<f64>), ConfigError> {
+    let value = required(mapping, fields.key, what, fields.key, fields.expected)?;
+    let Value::Mapping(inner) = value else {
+        return Err(field_error(
+            what,
+            fields.key,
+            format!("is a {}, not a mapping", kind(value)),
+            fields.expected,
+        ));
+    };
+    let dimension = |key: &str, field: &'static str| -> Result<u64, ConfigError> {
+        let value = required(inner, key, what, field, fields.expected)?;
+        value.as_u64().ok_or_else(|| {
+            field_error(
+                what,
+                field,
+                format!("is {}", describe(value)),
+                fields.expected,
+            )
+        })
+    };
+    let rows = dimension("rows", fields.rows)?;
+    let cols = dimension("cols", fields.cols)?;
+    let data_value = required(inner, "data", what, fields.data, fields.expected)?;
+    let data = numbers(data_value, None, what, fields.data, fields.expected)?;
+    if let Some((expected_rows, expected_cols)) = shape
+        && (rows, cols) != (expected_rows, expected_cols)
+    {
+        return Err(field_error(
+            what,
+            fields.rows,
+            format!("and cols give a {rows}x{cols} matrix"),
+            fields.expected,
+        ));
+    }
+    if rows.checked_mul(cols) != Some(data.len() as u64) {
+        return Err(field_error(
+            what,
+            fields.data,
+            format!(
+                "has {} entries but rows x cols = {rows} x {cols}",
+                data.len()
+            ),
+            fields.expected,
+        ));
+    }
+    Ok((rows, cols, data))
+}
+
+/// The distortion from `distortion_model` and `distortion_coefficients`.
+fn distortion(mapping: &Mapping, what: &str) -> Result<Distortion, ConfigError> {
+    const MODEL_EXPECTED: &str = "plumb_bob, rational_polynomial (with k4 = k5 = k6 = 0) or none";
+    let model_value = required(
+        mapping,
+        "distortion_model",
+        what,
+        "distortion_model",
+        MODEL_EXPECTED,
+    )?;
+    let Some(model) = model_value.as_str() else {
+        return Err(field_error(
+            what,
+            "distortion_model",
+            format!("is {}", describe(model_value)),
+            MODEL_EXPECTED,
+        ));
+    };
+    let coefficients = if mapping.contains_key("distortion_coefficients") {
+        matrix(mapping, &DISTORTION, None, what)?.2
+    } else if model == "none" {
+        Vec::new()
+    } else {
+        return Err(field_error(
+            what,
+            DISTORTION.key,
+            "is missing",
+            DISTORTION.expected,
+        ));
+    };
+    match model {
+        "plumb_bob" | "rational_polynomial" => {}
+        "none" if coefficients.iter().all(|c| *c == 0.0) => return Ok(Distortion::NONE),
+        "none" => {
+            return Err(field_error(
+                what,
+                DISTORTION.data,
+                "has non-zero coefficients although distortion_model is none",
+                "all zeros (or no distortion_coefficients) with distortion_model: none",
+            ));
+        }
+        other => {
+            return Err(field_error(
+                what,
+                "distortion_model",
+                format!("is `{other}`, which conesight's camera model does not support"),
+                MODEL_EXPECTED,
+            ));
+        }
+    }
+    let mut five = [0.0; 5];
+    match coefficients.len() {
+        4 | 5 => five[..coefficients.len()].copy_from_slice(&coefficients),
+        8 if coefficients[5..].iter().all(|c| *c == 0.0) => {
+            five.copy_from_slice(&coefficients[..5]);
+        }
+        8 => {
+            return Err(field_error(
+                what,
+                DISTORTION.data,
+                format!(
+                    "has rational coefficients k4, k5, k6 = {:?}, which the plumb_bob camera \
+                     model cannot represent",
+                    &coefficients[5..]
+                ),
+                DISTORTION.expected,
+            ));
+        }
+        n => {
+            return Err(field_error(
+                what,
+                DISTORTION.data,
+                format!("has {n} coefficients"),
+                DISTORTION.expected,
+            ));
+        }
+    }
+    Ok(Distortion::from_array(five))
+}
+
+impl Camera {
+    /// Parses a ROS `camera_info` YAML text (see the module docs). `what` names the source
+    /// (a path or a description) in error messages.
+    ///
+    /// Errors name the offending field and the expected form: missing fields, matrices whose
+    /// `rows x cols` differ from `data`'s length, a camera matrix that is not 3x3 or has
+    /// non-positive focal lengths, skew, or a principal point outside the image, zero image
+    /// sizes, and unsupported distortion models.
+    pub fn from_ros_yaml_str(text: &str, what: &str) -> Result<Self, ConfigError> {
+        let mapping = parse_mapping(text, what, CAMERA_INFO_HINT)?;
+        let size = |key: &'static str| {
+            let value = required(&mapping, key, what, key, "a positive integer (pixels)")?;
+            positive_u32(value, what, key, "a positive integer (pixels)")
+        };
+        let width_px = size("image_width")?;
+        let height_px = size("image_height")?;
+        if let Some(name) = mapping.get("camera_name")
+            && !(name.is_string() || name.is_null())
+        {
+            return Err(field_error(
+                what,
+                "camera_name",
+                format!("is {}", describe(name)),
+                "a string",
+            ));
+        }
+
+        let (_, _, k) = matrix(&mapping, &CAMERA_MATRIX, Some((3, 3)), what)?;
+        let (fx_px, cx_px, fy_px, cy_px) = (k[0], k[2], k[4], k[5]);
+        if !(fx_px > 0.0 && fy_px > 0.0) {
+            return Err(field_error(
+                what,
+                CAMERA_MATRIX.data,
+                format!("has focal lengths fx = {fx_px}, fy = {fy_px}"),
+                CAMERA_MATRIX.expected,
+            ));
+        }
+        let fixed = [
+            (k[1], 0.0),
+            (k[3], 0.0),
+            (k[6], 0.0),
+            (k[7], 0.0),
+            (k[8], 1.0),
+        ];
+        if fixed
+            .iter()
+            .any(|(value, want)| (value - want).abs() > CAMERA_MATRIX_FIXED_TOLERANCE)
+        {
+            return Err(field_error(
+                what,
+                CAMERA_MATRIX.data,
+                format!(
+                    "has skew {} or a bottom row [{}, {}, {}] other than [0, 0, 1]",
+                    k[1], k[6], k[7], k[8]
+                ),
+                CAMERA_MATRIX.expected,
+            ));
+        }
+        let inside = |c: f64, size: u32| c >= 0.0 && c <= f64::from(size);
+        if !(inside(cx_px, width_px) && inside(cy_px, height_px)) {
+            return Err(field_error(
+                what,
+                CAMERA_MATRIX.data,
+                format!(
+                    "puts the principal point ({cx_px}, {cy_px}) outside the \
+                     {width_px}x{height_px} image"
+                ),
+                CAMERA_MATRIX.expected,
+            ));
+        }
+
+        let distortion = distortion(&mapping, what)?;
+        if mapping.contains_key(RECTIFICATION.key) {
+            matrix(&mapping, &RECTIFICATION, Some((3, 3)), what)?;
+        }
+        if mapping.contains_key(PROJECTION.key) {
+            matrix(&mapping, &PROJECTION, Some((3, 4)), what)?;
+        }
+        Ok(Self {
+            width_px,
+            height_px,
+            fx_px,
+            fy_px,
+            cx_px,
+            cy_px,
+            distortion,
+        })
+    }
+
+    /// Reads a ROS `camera_info` YAML file, see [`Self::from_ros_yaml_str`].
+    pub fn from_ros_yaml_file(path: impl AsRef<Path>) -> Result<Self, ConfigError> {
+        let path = path.as_ref();
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
+            path: path.to_owned(),
+            source,
+        })?;
+        Self::from_ros_yaml_str(&text, &path.display().to_string())
+    }
+
+    /// This camera as ROS `camera_info` YAML named `camera_name`, in `camera_calibration`'s
+    /// layout: `plumb_bob`, identity rectification, projection `[K | 0]`.
+    /// [`Self::from_ros_yaml_str`] reads it back exactly (numbers are written in Rust's
+    /// shortest round-trip form).
+    pub fn to_ros_yaml(&self, camera_name: &str) -> String {
+        let list = |values: &[f64]| {
+            values
+                .iter()
+                .map(|v| format!("{v:?}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        let (fx, fy, cx, cy) = (self.fx_px, self.fy_px, self.cx_px, self.cy_px);
+        let name = serde_yaml::to_string(camera_name).unwrap_or_else(|_| "camera\n".to_owned());
+        format!(
+            "image_width: {}\nimage_height: {}\ncamera_name: {}\
+             camera_matrix:\n  rows: 3\n  cols: 3\n  data: [{}]\n\
+             distortion_model: plumb_bob\n\
+             distortion_coefficients:\n  rows: 1\n  cols: 5\n  data: [{}]\n\
+             rectification_matrix:\n  rows: 3\n  cols: 3\n  data: [{}]\n\
+             projection_matrix:\n  rows: 3\n  cols: 4\n  data: [{}]\n",
+            self.width_px,
+            self.height_px,
+            name,
+            list(&[fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0]),
+            list(&self.distortion.to_array()),
+            list(&[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]),
+            list(&[fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0]),
+        )
+    }
+}
