@@ -71,7 +71,7 @@ pub fn random_effects(rng: &mut impl Rng) -> CameraEffects {
         vignetting: rng.random_range(0.0..0.45),
         read_noise: rng.random_range(0.002..0.02),
         shot_noise_gain: rng.random_range(0.0..0.002),
-        motion_blur_px: if rng.random_bool(0.25) {
+        motion_blur_px: if rng.random_bool(0.2) {
             rng.random_range(1.0..6.0)
         } else {
             0.0
@@ -82,7 +82,7 @@ pub fn random_effects(rng: &mut impl Rng) -> CameraEffects {
         } else {
             0.0
         },
-        jpeg_quality: rng.random_bool(0.5).then(|| rng.random_range(35..95)),
+        jpeg_quality: rng.random_bool(0.3).then(|| rng.random_range(35..95)),
         noise_key: rng.random(),
     }
 }

@@ -187,8 +187,13 @@ pub fn sky(env: &Environment, tex: &Textures, offset: [f32; 2], d: &Vector3<f64>
     let azimuth = fast_atan2(d.y as f32, d.x as f32);
     // Backdrop: a ragged band above the horizon.
     let turn = azimuth / std::f32::consts::TAU + 0.5 + offset[0];
-    let index = ((turn.fract() * PROFILE_SAMPLES as f32) as usize).min(PROFILE_SAMPLES - 1);
-    let band = env.backdrop_height_rad * (0.3 + tex.profile[index]);
+    let position = turn.fract() * PROFILE_SAMPLES as f32;
+    let index = (position as usize).min(PROFILE_SAMPLES - 1);
+    let (a, b) = (
+        tex.profile[index],
+        tex.profile[(index + 1) % PROFILE_SAMPLES],
+    );
+    let band = env.backdrop_height_rad * (0.3 + a + (b - a) * position.fract());
     if dz < band {
         let detail = 1.0 + 1.2 * tex.grain.sample(azimuth * 900.0, dz * 900.0, 1.0);
         let light = [0, 1, 2].map(|c| env.ambient_rgb[c] * 0.8 + env.sun_rgb[c] * 0.25);
