@@ -2,6 +2,7 @@
 //!
 //! Subcommands:
 //! - `demo`: the geometry demo (see [`demo`]); `make demo` runs it.
+//! - `sim`: the synthetic scene renderer ([`conesight_sim::cli`]).
 
 mod bev;
 mod demo;
@@ -21,11 +22,15 @@ enum Command {
     /// Geometry demo: a Formula Student track seen by the paper's camera, exact silhouette
     /// keypoints plus noise, solved by the cone PnP; prints errors, writes a bird's-eye PNG.
     Demo(demo::DemoArgs),
+    /// Render synthetic Formula Student scenes with exact labels (random frames, or
+    /// `sim sequence` for a driven track).
+    Sim(conesight_sim::cli::SimArgs),
 }
 
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
     match cli.command {
         Command::Demo(args) => demo::run(&args),
+        Command::Sim(args) => conesight_sim::cli::run(args),
     }
 }
