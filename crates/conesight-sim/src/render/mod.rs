@@ -223,34 +223,52 @@ impl Renderer {
             .map(|(row, (colours, row_ids))| {
                 let tiles = frame.row_tiles(row as i64, row as i64, w);
                 let mut counts: Vec<(u32, u64)> = Vec::new();
+                // Background: blend the two grid rows, then interpolate along the row.
                 let gy = row / BACKGROUND_STEP;
                 let fy = (row % BACKGROUND_STEP) as f32 / BACKGROUND_STEP as f32;
-                for col in 0..w {
-                    let (active, _) = &tiles[col / TILE_PX];
-                    let n = self.rays[row * w + col];
-                    let ray = Vector3::new(f64::from(n[0]), f64::from(n[1]), 1.0);
-                    if let Some((colour, id)) =
-                        frame.object_hit(&ray, col as i64, row as i64, active, Some(&mut counts))
-                    {
-                        colours[col] = colour;
-                        row_ids[col] = id;
-                        continue;
-                    }
+                let upper = &grid[gy * grid_w..(gy + 1) * grid_w];
+                let lower = &grid[(gy + 1) * grid_w..(gy + 2) * grid_w];
+                let blended: Vec<[f32; 3]> = upper
+                    .iter()
+                    .zip(lower)
+                    .map(|(a, b)| {
+                        [
+                            a[0] + (b[0] - a[0]) * fy,
+                            a[1] + (b[1] - a[1]) * fy,
+                            a[2] + (b[2] - a[2]) * fy,
+                        ]
+                    })
+                    .collect();
+                for (col, colour) in colours.iter_mut().enumerate() {
                     let gx = col / BACKGROUND_STEP;
                     let fx = (col % BACKGROUND_STEP) as f32 / BACKGROUND_STEP as f32;
-                    let at = |x: usize, y: usize| grid[y * grid_w + x];
-                    let (a, b, c, d) = (
-                        at(gx, gy),
-                        at(gx + 1, gy),
-                        at(gx, gy + 1),
-                        at(gx + 1, gy + 1),
-                    );
-                    colours[col] = [0, 1, 2].map(|k| {
-                        let top = a[k] + (b[k] - a[k]) * fx;
-                        let bottom = c[k] + (d[k] - c[k]) * fx;
-                        top + (bottom - top) * fy
-                    });
-                    row_ids[col] = BACKGROUND_ID;
+                    let (a, b) = (blended[gx], blended[gx + 1]);
+                    *colour = [
+                        a[0] + (b[0] - a[0]) * fx,
+                        a[1] + (b[1] - a[1]) * fx,
+                        a[2] + (b[2] - a[2]) * fx,
+                    ];
+                }
+                row_ids.fill(BACKGROUND_ID);
+                // Objects: only in column tiles that have any.
+                for (tile, (active, _)) in tiles.iter().enumerate() {
+                    if active.is_empty() {
+                        continue;
+                    }
+                    for col in tile * TILE_PX..((tile + 1) * TILE_PX).min(w) {
+                        let n = self.rays[row * w + col];
+                        let ray = Vector3::new(f64::from(n[0]), f64::from(n[1]), 1.0);
+                        if let Some((colour, id)) = frame.object_hit(
+                            &ray,
+                            col as i64,
+                            row as i64,
+                            active,
+                            Some(&mut counts),
+                        ) {
+                            colours[col] = colour;
+                            row_ids[col] = id;
+                        }
+                    }
                 }
                 counts
             })
