@@ -135,16 +135,25 @@ fn box_blur(buffer: &mut [[f32; 3]], w: usize, h: usize, radius: usize, horizont
         .into_par_iter()
         .map(|line| {
             let mut result = vec![[0.0_f32; 3]; len];
+            // Running sum over the clamped window [i - radius, i + radius].
+            let mut sum = [0.0_f32; 3];
+            for j in 0..=radius.min(len - 1) {
+                let p = source[at(line, j)];
+                sum = [sum[0] + p[0], sum[1] + p[1], sum[2] + p[2]];
+            }
             for (i, value) in result.iter_mut().enumerate() {
                 let lo = i.saturating_sub(radius);
                 let hi = (i + radius).min(len - 1);
-                let mut sum = [0.0_f32; 3];
-                for j in lo..=hi {
-                    let p = source[at(line, j)];
-                    sum = [sum[0] + p[0], sum[1] + p[1], sum[2] + p[2]];
-                }
                 let n = (hi - lo + 1) as f32;
                 *value = sum.map(|s| s / n);
+                if i + radius + 1 < len {
+                    let p = source[at(line, i + radius + 1)];
+                    sum = [sum[0] + p[0], sum[1] + p[1], sum[2] + p[2]];
+                }
+                if i >= radius {
+                    let p = source[at(line, i - radius)];
+                    sum = [sum[0] - p[0], sum[1] - p[1], sum[2] - p[2]];
+                }
             }
             result
         })
@@ -184,6 +193,24 @@ fn motion_blur(buffer: &mut [[f32; 3]], w: usize, h: usize, length_px: f32, angl
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn box_blur_matches_the_direct_mean() {
+        let (w, h) = (7, 3);
+        let original: Vec<[f32; 3]> = (0..w * h)
+            .map(|i| [i as f32, (i * i % 5) as f32, 1.0])
+            .collect();
+        let mut blurred = original.clone();
+        box_blur(&mut blurred, w, h, 2, true);
+        for row in 0..h {
+            for col in 0..w {
+                let (lo, hi) = (col.saturating_sub(2), (col + 2).min(w - 1));
+                let mean =
+                    (lo..=hi).map(|c| original[row * w + c][1]).sum::<f32>() / (hi - lo + 1) as f32;
+                assert!((blurred[row * w + col][1] - mean).abs() < 1e-4);
+            }
+        }
+    }
 
     #[test]
     fn exposure_brightens_and_noise_is_deterministic() {
