@@ -79,7 +79,10 @@ impl Distortion {
     }
 
     /// Distorts a normalised point and returns the 2x2 Jacobian d(distorted)/d(undistorted).
-    pub fn distort_with_jacobian(&self, undistorted: &Vector2<f64>) -> (Vector2<f64>, Matrix2<f64>) {
+    pub fn distort_with_jacobian(
+        &self,
+        undistorted: &Vector2<f64>,
+    ) -> (Vector2<f64>, Matrix2<f64>) {
         let (x, y) = (undistorted.x, undistorted.y);
         let r2 = x * x + y * y;
         let radial = 1.0 + r2 * (self.k1 + r2 * (self.k2 + r2 * self.k3));
@@ -211,7 +214,9 @@ impl Camera {
     pub fn project(&self, point_in_camera: &Point3<f64>) -> Result<Point2<f64>, GeometryError> {
         let z = point_in_camera.z;
         if !point_in_camera.iter().all(|v| v.is_finite()) {
-            return Err(GeometryError::NonFinite { what: "point_in_camera" });
+            return Err(GeometryError::NonFinite {
+                what: "point_in_camera",
+            });
         }
         if z <= 1e-9 {
             return Err(GeometryError::BehindCamera { z_m: z });
@@ -226,7 +231,9 @@ impl Camera {
     ) -> Result<(Point2<f64>, Matrix2x3<f64>), GeometryError> {
         let (x, y, z) = (point_in_camera.x, point_in_camera.y, point_in_camera.z);
         if !point_in_camera.iter().all(|v| v.is_finite()) {
-            return Err(GeometryError::NonFinite { what: "point_in_camera" });
+            return Err(GeometryError::NonFinite {
+                what: "point_in_camera",
+            });
         }
         if z <= 1e-9 {
             return Err(GeometryError::BehindCamera { z_m: z });
