@@ -29,11 +29,12 @@ from torch.utils.data import DataLoader
 from tqdm import tqdm
 
 from conesight_train.checkpoint import load_model_from_checkpoint
-from conesight_train.data.patches import KeypointDataset, PatchSource, RealCropPatches
+from conesight_train.data.patches import KeypointDataset, PatchSource, RealCropPatches, Subset
 from conesight_train.data.supervisely_keypoints import read_keypoint_crops
 from conesight_train.export import INPUT_NAME, ort_session
 from conesight_train.keypoints import KEYPOINT_NAMES
 from conesight_train.metrics import KeypointErrors
+from conesight_train.preprocess import patch_to_input
 from conesight_train.train_keypoints import open_sources
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
@@ -103,6 +104,20 @@ def plot_per_keypoint(results: dict[str, dict[str, KeypointErrors]], path: Path)
     plt.close(fig)
 
 
+def write_examples(predict: Predictor, source: PatchSource, count: int, path: Path) -> None:
+    """PNG of `count` evenly spaced patches with labels (dots) and predictions (crosses)."""
+    import cv2
+
+    from conesight_train.inspect_data import draw_grid
+
+    indices = np.linspace(0, len(source) - 1, min(count, len(source))).round().astype(int)
+    picked = Subset(source, indices.tolist())
+    images = np.stack([patch_to_input(picked[i].patch_rgb) for i in range(len(picked))])
+    predicted, _ = predict(images)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    cv2.imwrite(str(path), draw_grid(picked, len(picked), predicted_px=predicted))
+
+
 def format_table(title: str, results: dict[str, KeypointErrors]) -> str:
     """Side-by-side table: summary rows, then one row per keypoint (mean px)."""
     labels = list(results)
@@ -144,6 +159,12 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--json", type=Path, help="write the results here")
     parser.add_argument("--png", type=Path, help="per-keypoint bar chart")
+    parser.add_argument(
+        "--examples-png",
+        type=Path,
+        help="grid of patches of the last data set: labels (dots), first model (crosses)",
+    )
+    parser.add_argument("--examples", type=int, default=40, help="patches in --examples-png")
     args = parser.parse_args(argv)
     torch.set_num_threads(args.threads)
 
@@ -181,6 +202,9 @@ def main(argv: list[str] | None = None) -> None:
         all_results[data_name] = results
     if args.png:
         plot_per_keypoint(all_results, args.png)
+    if args.examples_png:
+        source = list(datasets.values())[-1]
+        write_examples(next(iter(predictors.values())), source, args.examples, args.examples_png)
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")

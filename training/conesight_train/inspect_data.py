@@ -50,8 +50,18 @@ def rektnet_crops(csv_path: Path, image_dir: Path) -> list[KeypointCrop]:
     return crops
 
 
-def draw_grid(source: PatchSource, count: int, columns: int = 10) -> np.ndarray:
-    """BGR image: the first `count` patches, upscaled, with keypoints."""
+def _to_draw(x: float, y: float) -> tuple[int, int]:
+    return round(float(x + 0.5) * DRAW_SCALE - 0.5), round(float(y + 0.5) * DRAW_SCALE - 0.5)
+
+
+def draw_grid(
+    source: PatchSource,
+    count: int,
+    columns: int = 10,
+    predicted_px: np.ndarray | None = None,
+) -> np.ndarray:
+    """BGR image: the first `count` patches, upscaled, labels as dots; with `predicted_px`
+    [count, 7, 2], predictions as crosses of the same colour."""
     tiles = []
     for index in range(min(count, len(source))):
         sample = source[index]
@@ -63,11 +73,11 @@ def draw_grid(source: PatchSource, count: int, columns: int = 10) -> np.ndarray:
             interpolation=cv2.INTER_NEAREST,
         )
         for k, (x, y) in enumerate(np.asarray(sample.keypoints_px)):
-            centre = (
-                round(float(x + 0.5) * DRAW_SCALE - 0.5),
-                round(float(y + 0.5) * DRAW_SCALE - 0.5),
-            )
-            cv2.circle(tile, centre, 3, KEYPOINT_COLOURS_BGR[k], -1, cv2.LINE_AA)
+            cv2.circle(tile, _to_draw(x, y), 3, KEYPOINT_COLOURS_BGR[k], -1, cv2.LINE_AA)
+        if predicted_px is not None:
+            for k, (x, y) in enumerate(predicted_px[index]):
+                colour = KEYPOINT_COLOURS_BGR[k]
+                cv2.drawMarker(tile, _to_draw(x, y), colour, cv2.MARKER_CROSS, 9, 1, cv2.LINE_AA)
         tiles.append(tile)
     if not tiles:
         raise ValueError("the data set is empty")

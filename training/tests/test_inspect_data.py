@@ -1,10 +1,11 @@
 """The data inspection CLI: statistics and the drawn grid."""
 
 import cv2
+import numpy as np
 import pytest
 
 from conesight_train.data.toy_cones import toy_cone_patches
-from conesight_train.inspect_data import main, statistics
+from conesight_train.inspect_data import draw_grid, main, statistics
 from conesight_train.keypoints import CR3D
 
 
@@ -23,3 +24,12 @@ def test_cli_writes_a_grid(tmp_path, capsys):
     image = cv2.imread(str(out))
     assert image.shape == (2 * 240, 10 * 240, 3)
     assert "median_cross_ratio_left" in capsys.readouterr().out
+
+
+def test_grid_draws_predictions_as_crosses():
+    source = toy_cone_patches(2, seed=5)
+    plain = draw_grid(source, 2, columns=2)
+    moved = np.stack([source[i].keypoints_px + 3.0 for i in range(2)])
+    with_predictions = draw_grid(source, 2, columns=2, predicted_px=moved)
+    assert plain.shape == with_predictions.shape
+    assert (plain != with_predictions).any()
