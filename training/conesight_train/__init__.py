@@ -12,5 +12,8 @@ Modules (entry functions in brackets):
 - `eval_keypoints`: errors on held-out and real patches (`conesight-eval-keypoints`).
 - `export`: ONNX export, ONNX Runtime check, model card (`export_with_card`, `conesight-export`).
 - `bench_keypoints`: ONNX Runtime speed, production vs baseline (`conesight-bench-keypoints`).
+- `inspect_data`: data set checks and a keypoint grid PNG (`conesight-inspect-data`).
+- `parity`: the Python crop against the renderer's patches (`patch_parity`).
 - `checkpoint`, `metrics`, `seed`: helpers.
+- `detector/`: the cone detector (its own package docs, `conesight-train-detector`).
 """
