@@ -4,6 +4,7 @@ Each `--model LABEL=PATH` is a training checkpoint (`.pt`, run in PyTorch) or an
 `.onnx` file (run in ONNX Runtime, as deployed). Data sets:
 
 - `--synthetic SPEC`: held-out patches (a renderer folder or `toy:COUNT[:SEED]`);
+- `--rektnet CSV --rektnet-images DIR`: MIT RektNet crops, cut the same way as the real crops.
 - `--real-crops DIR`: Supervisely keypoint crops (default `../shared/data/real-dev/
   fsoco-keypoint-crops` when present). Each crop is taken as the detector box and cut by the crop
   rule into an 80x80 patch; its keypoints map by the same rule, so errors are in 80x80 patch
@@ -32,6 +33,7 @@ from conesight_train.checkpoint import load_model_from_checkpoint
 from conesight_train.data.patches import KeypointDataset, PatchSource, RealCropPatches, Subset
 from conesight_train.data.supervisely_keypoints import read_keypoint_crops
 from conesight_train.export import INPUT_NAME, ort_session
+from conesight_train.inspect_data import rektnet_crops
 from conesight_train.keypoints import KEYPOINT_NAMES
 from conesight_train.metrics import KeypointErrors
 from conesight_train.preprocess import patch_to_input
@@ -156,6 +158,8 @@ def main(argv: list[str] | None = None) -> None:
         default="replicate",
         help="what lies around a real crop in its patch (see RealCropPatches)",
     )
+    parser.add_argument("--rektnet", type=Path, help="MIT RektNet keypoint CSV (with images)")
+    parser.add_argument("--rektnet-images", type=Path, help="image folder of --rektnet")
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--json", type=Path, help="write the results here")
     parser.add_argument("--png", type=Path, help="per-keypoint bar chart")
@@ -191,6 +195,11 @@ def main(argv: list[str] | None = None) -> None:
         report["real_crops_skipped_not_7_points"] = len(crop_set.skipped_point_count)
     elif not args.no_real:
         print(f"real crops not found at {real_dir}; pass --real-crops or --no-real")
+    if args.rektnet:
+        if args.rektnet_images is None:
+            parser.error("--rektnet needs --rektnet-images DIR")
+        crops = rektnet_crops(args.rektnet, args.rektnet_images)
+        datasets["rektnet"] = RealCropPatches(crops, outside=args.real_outside)
     if not datasets:
         parser.error("nothing to evaluate: pass --synthetic and/or --real-crops")
 
