@@ -1,7 +1,8 @@
 """Speed probe: ONNX Runtime ms per 1920x1200 frame for the band scheme (preprocessing, network,
 and the candidate threshold), with the machine's load average printed beside it.
 
-    python -m conesight_train.detector.speed [--onnx models/detector.onnx] [--threads 2]
+    python -m conesight_train.detector.speed [--onnx models/detector.onnx] [--threads 1 2]
+    python -m conesight_train.detector.speed --save build/detector-random.onnx   # for Rust
 
 Without `--onnx` it exports a random-init network of the configured size first (speed does not
 depend on the weights). Prints one line per thread count.
@@ -10,6 +11,7 @@ depend on the weights). Prints one line per thread count.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import tempfile
 import time
@@ -20,8 +22,9 @@ import onnxruntime as ort
 import torch
 
 from conesight_train.detector.band import BandParams, band_to_input
+from conesight_train.detector.config import TrainConfig
 from conesight_train.detector.model import ConeDetector, DetectorParams, multiply_accumulates
-from conesight_train.detector.onnx_export import export_onnx
+from conesight_train.detector.onnx_export import Parity, export_onnx, model_card
 
 
 def session(path: Path, threads: int) -> ort.InferenceSession:
@@ -62,6 +65,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--onnx", type=Path, help="exported detector (default: random init)")
     parser.add_argument("--threads", type=int, nargs="+", default=[1, 2])
     parser.add_argument("--frames", type=int, default=30)
+    parser.add_argument(
+        "--save", type=Path, help="keep the random-init model (and its card) here, for Rust"
+    )
     args = parser.parse_args(argv)
     band = BandParams()
     torch.manual_seed(0)
@@ -74,8 +80,13 @@ def main(argv: list[str] | None = None) -> None:
                 f"network: {macs / 1e6:.0f} M multiply-accumulates per frame "
                 f"({band.input_width_px}x{band.input_height_px} input)"
             )
-            path = Path(tmp) / "detector.onnx"
+            path = args.save or Path(tmp) / "detector.onnx"
             export_onnx(model, path, band)
+            if args.save:
+                parity = Parity(0.0, 0.0, 0, 0)  # not checked: a speed model only
+                config = TrainConfig(band=band, model=model.params).to_dict()
+                card = model_card(path, config, parity, None)
+                path.with_suffix(".card.json").write_text(json.dumps(card, indent=2) + "\n")
         load = os.getloadavg()
         print(f"load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} on {os.cpu_count()} cores")
         for threads in args.threads:
