@@ -147,3 +147,36 @@ def test_toy_frames_are_seeded():
     assert isinstance(a, LabelledFrame)
     np.testing.assert_array_equal(a.image_rgb, b.image_rgb)
     np.testing.assert_array_equal(a.boxes_px, b.boxes_px)
+
+
+def quaternion_xyzw(r):
+    """Rotation matrix -> (x, y, z, w), for proper rotations with trace > -1."""
+    w = np.sqrt(1.0 + np.trace(r)) / 2
+    return [
+        (r[2, 1] - r[1, 2]) / (4 * w),
+        (r[0, 2] - r[2, 0]) / (4 * w),
+        (r[1, 0] - r[0, 1]) / (4 * w),
+        w,
+    ]
+
+
+def test_horizon_follows_the_pitch(tmp_path):
+    from conesight_train.detector.band import HORIZON_MARGIN_PX, band_top_from
+    from conesight_train.detector.data import horizon_from_calibration
+
+    # vehicle_from_camera of a level camera: camera z = vehicle x, camera x = -y, camera y = -z.
+    level = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+    pitch = 0.1  # looking down
+    c, s = np.cos(pitch), np.sin(pitch)
+    about_y = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+    (tmp_path / "info.yaml").write_text(
+        "camera_matrix:\n  data: [2000.0, 0.0, 960.0, 0.0, 2000.0, 600.0, 0.0, 0.0, 1.0]\n"
+    )
+    for rotation, want in ((level, 600.0), (about_y @ level, 600.0 - 2000.0 * np.tan(pitch))):
+        q = [float(v) for v in quaternion_xyzw(rotation)]
+        (tmp_path / "ext.yaml").write_text(
+            f"vehicle_from_camera:\n  translation_m: [0, 0, 1]\n  rotation_xyzw: {q}\n"
+        )
+        got = horizon_from_calibration(tmp_path / "info.yaml", tmp_path / "ext.yaml")
+        assert got == pytest.approx(want, abs=1e-6)
+    assert band_top_from(600.0) == 600 - HORIZON_MARGIN_PX == BandParams().band_top_px

@@ -37,6 +37,10 @@ pub struct DetectorConfig {
     pub card_path: Option<PathBuf>,
     /// Thresholds overriding the card's (which override [`Thresholds::default`]).
     pub thresholds: Option<Thresholds>,
+    /// The band's first frame row, overriding the card's `band_top_px` (the level paper
+    /// camera's); set it from the calibration with
+    /// [`crate::horizon::band_top_from_horizon`]. Ignored by the Ultralytics layout.
+    pub band_top_px: Option<u32>,
     /// ONNX Runtime library and threads.
     pub onnx: ModelOptions,
 }
@@ -68,6 +72,10 @@ impl Detector {
                 ModelCard::read(&expected)?
             }
         };
+        let mut card = card;
+        if let (Some(top), Some(band)) = (config.band_top_px, card.band.as_mut()) {
+            band.band_top_px = top;
+        }
         card.validate(&name)?;
         let classes = class_mapping(&card.class_names, &name)?;
         let thresholds = config.thresholds.or(card.thresholds).unwrap_or_default();
@@ -85,6 +93,14 @@ impl Detector {
     /// The card in use.
     pub fn card(&self) -> &ModelCard {
         &self.card
+    }
+
+    /// Moves the band (conesight layout) to start at frame row `top_px`, e.g. after a new
+    /// calibration; the Ultralytics layout ignores it.
+    pub fn set_band_top_px(&mut self, top_px: u32) {
+        if let Some(band) = self.card.band.as_mut() {
+            band.band_top_px = top_px;
+        }
     }
 
     /// The thresholds in use.

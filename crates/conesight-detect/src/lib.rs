@@ -10,6 +10,7 @@
 //! - [`preprocess`]: the band rule and the letterbox rule, and [`preprocess::InputMapping`]
 //!   back to frame pixels.
 //! - [`decode`]: output tensor -> candidates -> class-aware NMS (shared by both layouts).
+//! - [`horizon`]: the band's first row from the camera calibration (horizon row - 40 px).
 //! - [`thresholds`]: [`Thresholds`] (score, NMS IoU, cap) with `Default`.
 //! - [`detector`]: [`Detector`], [`DetectorConfig`], [`Detection`].
 //! - [`error`]: the error enum, [`DetectError`].
@@ -20,6 +21,7 @@ pub mod card;
 pub mod decode;
 pub mod detector;
 pub mod error;
+pub mod horizon;
 pub mod preprocess;
 pub mod thresholds;
 

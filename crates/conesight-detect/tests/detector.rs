@@ -138,3 +138,18 @@ fn bad_models_cards_and_frames_are_clear_errors() {
     let err = Detector::load(&data("ultralytics_const.onnx"), &config).expect_err("bad iou");
     assert!(err.to_string().contains("nms_iou"), "{err}");
 }
+
+#[test]
+fn band_top_follows_the_config_and_the_setter() {
+    let config = DetectorConfig {
+        band_top_px: Some(3),
+        ..DetectorConfig::default()
+    };
+    let mut detector = Detector::load(&data("tiny_band.onnx"), &config).unwrap();
+    let frame = image::open(data("tiny_band_frame.png")).unwrap().to_rgb8();
+    assert_eq!(detector.preprocess(&frame).unwrap().1.offset_y, 3.0);
+    detector.set_band_top_px(500); // clamped: the band's last row is the frame's
+    assert_eq!(detector.preprocess(&frame).unwrap().1.offset_y, 16.0);
+    let dets = detector.detect(&frame).unwrap();
+    assert!(dets.iter().all(|d| d.bbox_px[1] < d.bbox_px[3]));
+}

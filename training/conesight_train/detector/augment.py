@@ -49,6 +49,7 @@ class InputSample:
     classes: np.ndarray
     range_m: np.ndarray
     difficult: np.ndarray
+    top_px: int  # the frame row of the input's top edge (before augmentation)
 
 
 def _clip_boxes(
@@ -72,7 +73,7 @@ def to_input(
 ) -> InputSample:
     """The band of `frame` as network input; augmented when `rng` is given."""
     height, width = frame.image_rgb.shape[:2]
-    top = band.top_for(height)
+    top = band.top_for(height, frame.band_top_px)
     boxes = frame.boxes_px.astype(np.float64).reshape(-1, 4).copy()
     if rng is None:
         image = band_to_input(frame.image_rgb, band, top)
@@ -81,6 +82,7 @@ def to_input(
         return InputSample(
             image,
             *_clip_boxes(boxes, frame, band.input_width_px, band.input_height_px),
+            top,
         )
     p = params or DetectorAugmentParams()
     top = int(
@@ -117,4 +119,5 @@ def to_input(
     return InputSample(
         image,
         *_clip_boxes(boxes, frame, band.input_width_px, band.input_height_px),
+        top,
     )

@@ -8,9 +8,13 @@ below it (f = 2048 px), at 30 m a few px. The detector therefore sees only a ban
     each input pixel = the mean of a factor x factor block of frame pixels (box filter),
     float32 RGB, raw 0..255, channel-first [1, 3, input_height, input_width].
 
-`top` is `band_top_px` clamped to [0, frame_height - factor * input_height] (so a 1080-row
-frame uses its lowest rows when the default band would overrun). The frame width must equal
-`factor * input_width`. Defaults: 1920x1200 frames, band rows 560..1200 (40 px above the
+`top` is the band's first row clamped to [0, frame_height - factor * input_height] (so a
+1080-row frame uses its lowest rows when the band would overrun). The first row comes from
+the camera calibration when known: `top = horizon row - HORIZON_MARGIN_PX` (`band_top_from`;
+the horizon row is where the vehicle's forward direction projects, so pitch moves the band
+with the horizon); otherwise `band_top_px`, the level paper camera's value. 640 rows below the
+horizon reach ground points at f h / 600 = 3.4 m (f = 2048 px, h = 1 m). The frame width must
+equal `factor * input_width`. Defaults: 1920x1200 frames, band rows 560..1200 (40 px above the
 horizon of a level camera at cy = 600), factor 2 -> a 960x320 input (0.31 MPx).
 
 Coordinates follow OpenCV (pixel i centred at i; box edges are continuous). Input -> frame:
@@ -23,6 +27,25 @@ from dataclasses import asdict, dataclass
 
 import cv2
 import numpy as np
+
+
+# Rows kept above the horizon: roll (0.02 rad moves the horizon +-19 px at the image edges),
+# calibration error, and bumps.
+HORIZON_MARGIN_PX = 40
+
+
+def horizon_row_px(fy_px: float, cy_px: float, camera_from_vehicle_rotation: np.ndarray) -> float:
+    """Image row of the horizon at the principal point: the projection of the vehicle's
+    forward direction (x, REP-103) into the camera (OpenCV axes)."""
+    forward = np.asarray(camera_from_vehicle_rotation, np.float64) @ np.array([1.0, 0.0, 0.0])
+    if forward[2] <= 1e-6:
+        raise ValueError("the camera does not look forward: no horizon in the image")
+    return float(cy_px + fy_px * forward[1] / forward[2])
+
+
+def band_top_from(horizon_px: float) -> int:
+    """The band's first row for a horizon row (before clamping into the frame)."""
+    return round(horizon_px) - HORIZON_MARGIN_PX
 
 
 @dataclass(frozen=True)
@@ -44,15 +67,17 @@ class BandParams:
         """The frame width this band needs."""
         return self.factor * self.input_width_px
 
-    def top_for(self, frame_height_px: int) -> int:
-        """The band's first frame row for a frame of this height (clamped)."""
+    def top_for(self, frame_height_px: int, top_px: int | None = None) -> int:
+        """The band's first frame row for a frame of this height (clamped); `top_px` (from the
+        horizon) replaces `band_top_px` when given."""
         if frame_height_px < self.band_height_px:
             raise ValueError(
                 f"frame height {frame_height_px} px is below the band height "
                 f"{self.band_height_px} px (input height {self.input_height_px} x factor "
                 f"{self.factor}); use a smaller input height or factor"
             )
-        return min(max(self.band_top_px, 0), frame_height_px - self.band_height_px)
+        top = self.band_top_px if top_px is None else top_px
+        return min(max(top, 0), frame_height_px - self.band_height_px)
 
     def to_dict(self) -> dict[str, int]:
         """The fields for a model card."""
@@ -62,7 +87,8 @@ class BandParams:
 def band_to_input(frame_rgb: np.ndarray, band: BandParams, top_px: int | None = None) -> np.ndarray:
     """HxWx3 uint8 frame -> float32 [3, input_height, input_width] (see the module docs).
 
-    `top_px` overrides the band's first row (band jitter); it must keep the band in the frame.
+    `top_px` is the band's first row, used as is (it must keep the band in the frame);
+    None means `band.top_for(height)`.
     """
     if frame_rgb.ndim != 3 or frame_rgb.shape[2] != 3:
         raise ValueError(f"expected an HxWx3 RGB frame, got shape {frame_rgb.shape}")

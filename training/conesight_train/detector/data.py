@@ -7,7 +7,8 @@ CLASS_NAMES) and range_m [M] (NaN when the labels have no distances).
 
 Renderer layout (crates/conesight-sim writers): `images/NNNNNN.png|jpg`, and either
 `annotations/NNNNNN.json` (ours: `cones[*].class_id`, `.bbox.{x_min_px, ...}` OpenCV edges,
-`.range_m`) or `labels/NNNNNN.txt` (YOLO). JSON is preferred when both exist (it has ranges).
+`.range_m`) or `labels/NNNNNN.txt` (YOLO). JSON is preferred when both exist (it has ranges);
+with it, `camera_info/` and `extrinsics/` give each frame's horizon and so its band.
 """
 
 from __future__ import annotations
@@ -19,9 +20,11 @@ from typing import Protocol
 
 import cv2
 import numpy as np
+import yaml
 
 from conesight_train.data.errors import LabelError
 from conesight_train.data.yolo_txt import read_yolo_txt
+from conesight_train.detector.band import band_top_from, horizon_row_px
 from conesight_train.detector.model import CLASS_NAMES
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
@@ -44,6 +47,7 @@ class LabelledFrame:
     range_m: np.ndarray
     name: str = ""
     difficult: np.ndarray | None = None  # bool [M]; None = none difficult
+    band_top_px: int | None = None  # from the frame's calibration (horizon), when known
 
     def difficult_mask(self) -> np.ndarray:
         """Bool [M]: cones neither trained as positives nor counted by the metrics."""
@@ -66,6 +70,25 @@ def read_rgb(path: Path) -> np.ndarray:
     if bgr is None:
         raise LabelError(path, "cannot read the image")
     return np.ascontiguousarray(bgr[:, :, ::-1])
+
+
+def horizon_from_calibration(camera_info: Path, extrinsics: Path) -> float:
+    """The horizon row of a frame from its camera_info and extrinsics YAML (renderer format)."""
+    try:
+        info = yaml.safe_load(camera_info.read_text(encoding="utf-8"))
+        k = info["camera_matrix"]["data"]
+        ext = yaml.safe_load(extrinsics.read_text(encoding="utf-8"))
+        qx, qy, qz, qw = ext["vehicle_from_camera"]["rotation_xyzw"]
+    except (OSError, KeyError, TypeError, ValueError, yaml.YAMLError) as err:
+        raise LabelError(extrinsics, f"cannot read the calibration: {err!r}") from err
+    vehicle_from_camera = np.array(
+        [
+            [1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy - qz * qw), 2 * (qx * qz + qy * qw)],
+            [2 * (qx * qy + qz * qw), 1 - 2 * (qx * qx + qz * qz), 2 * (qy * qz - qx * qw)],
+            [2 * (qx * qz - qy * qw), 2 * (qy * qz + qx * qw), 1 - 2 * (qx * qx + qy * qy)],
+        ]
+    )
+    return horizon_row_px(float(k[4]), float(k[5]), vehicle_from_camera.T)
 
 
 def read_json_labels(
@@ -122,8 +145,14 @@ class RendererFrames:
         image_path, label_path = self.items[index]
         image = read_rgb(image_path)
         height, width = image.shape[:2]
+        band_top = None
         if label_path.suffix == ".json":
             boxes, classes, ranges, difficult, _ = read_json_labels(label_path)
+            stem = image_path.stem
+            camera_info = self.root / "camera_info" / f"{stem}.yaml"
+            extrinsics = self.root / "extrinsics" / f"{stem}.yaml"
+            if camera_info.is_file() and extrinsics.is_file():
+                band_top = band_top_from(horizon_from_calibration(camera_info, extrinsics))
         else:
             yolo = read_yolo_txt(label_path, width, height)
             boxes = (
@@ -135,7 +164,7 @@ class RendererFrames:
             classes = np.array([b.class_id for b in yolo], np.int64)
             ranges = np.full(len(yolo), np.nan)
             difficult = np.zeros(len(yolo), bool)
-        return LabelledFrame(image, boxes, classes, ranges, image_path.stem, difficult)
+        return LabelledFrame(image, boxes, classes, ranges, image_path.stem, difficult, band_top)
 
 
 def draw_toy_cone(

@@ -36,14 +36,14 @@ def predict_frames(
     results: list[ImageResult] = []
     for start in range(0, len(source), batch_size):
         frames = [source[i] for i in range(start, min(start + batch_size, len(source)))]
-        inputs = np.stack([to_input(f, band).image for f in frames])
+        samples = [to_input(f, band) for f in frames]
+        inputs = np.stack([s.image for s in samples])
         with torch.no_grad():
             outputs = head(torch.from_numpy(inputs)).numpy()
-        for frame, output in zip(frames, outputs, strict=True):
-            top = band.top_for(frame.image_rgb.shape[0])
+        for frame, sample, output in zip(frames, samples, outputs, strict=True):
             results.append(
                 ImageResult(
-                    detections_in_frame(output, band, top, thresholds),
+                    detections_in_frame(output, band, sample.top_px, thresholds),
                     frame.boxes_px,
                     frame.classes,
                     frame.range_m,
