@@ -28,7 +28,6 @@ from dataclasses import asdict, dataclass
 import cv2
 import numpy as np
 
-
 # Rows kept above the horizon: roll (0.02 rad moves the horizon +-19 px at the image edges),
 # calibration error, and bumps.
 HORIZON_MARGIN_PX = 40
