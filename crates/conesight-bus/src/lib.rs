@@ -1,0 +1,36 @@
+//! # conesight-bus
+//!
+//! Everything the services share about the Zenoh bus, so no call site names a key, a QoS or a
+//! codec itself.
+//!
+//! Modules:
+//! - [`topics`]: every key expression, `conesight/<namespace>/<vehicle>/<camera>/<stream>`
+//!   ([`Topics`], [`Stream`]); the per-run namespace keeps replays from mixing with live data.
+//! - [`args`]: [`ZenohArgs`], the clap args (with env fallbacks) flattened into every service.
+//! - [`session`]: [`open_session`] and [`zenoh_config`] (peer mode, explicit endpoints,
+//!   multicast scouting off unless asked for, a Zenoh config file accepted).
+//! - [`qos`]: [`declare_publisher`], [`declare_subscriber`] and [`publish`], encoding the QoS
+//!   rules per [`Stream`] ([`StreamQos`]): frames Drop + Data priority with a ring channel of 1
+//!   on the subscriber (newest frame wins), small messages Block + RealTime + express.
+//! - [`codec`]: the one [`encode`] / [`decode`] pair (protobuf, with a size limit).
+//! - [`error`]: [`BusError`] and [`DecodeError`].
+//!
+//! Entry point: `open_session(&args).await`, then `Topics::from_args(&args)?` and
+//! `declare_publisher(&session, &topics, camera, Stream::Cones).await`.
+
+pub mod args;
+pub mod codec;
+pub mod error;
+pub mod qos;
+pub mod session;
+pub mod topics;
+
+pub use args::{FrameEncoding, ZenohArgs, ZenohMode};
+pub use codec::{DEFAULT_MAX_MESSAGE_BYTES, decode, decode_with_limit, encode};
+pub use error::{BusError, DecodeError};
+pub use qos::{RingSubscriber, StreamQos, declare_publisher, declare_subscriber, publish};
+pub use session::{open_session, zenoh_config};
+pub use topics::{Stream, Topics};
+
+/// The Zenoh crate, re-exported so services use the same version.
+pub use zenoh;

@@ -1,0 +1,144 @@
+//! Publishers and subscribers with the QoS rules of each [`Stream`]:
+//!
+//! | stream | congestion control | priority | express | subscriber queue |
+//! | --- | --- | --- | --- | --- |
+//! | `frame` | Drop | Data | no | ring of 1: newest frame wins |
+//! | others | Block | RealTime | yes | ring of [`SMALL_MESSAGE_RING`] |
+//!
+//! Subscribers use ring channels only: a slow consumer loses the oldest samples and never
+//! blocks Zenoh's receive path (a FIFO that fills would stall every stream on that link).
+
+use zenoh::Session;
+use zenoh::bytes::Encoding;
+use zenoh::handlers::{RingChannel, RingChannelHandler};
+use zenoh::key_expr::KeyExpr;
+use zenoh::pubsub::{Publisher, Subscriber};
+use zenoh::qos::{CongestionControl, Priority};
+use zenoh::sample::Sample;
+
+use crate::codec::encode;
+use crate::error::BusError;
+use crate::topics::{Stream, Topics};
+
+/// Ring capacity of subscribers to frames: only the newest frame waits.
+pub const FRAME_RING: usize = 1;
+/// Ring capacity of subscribers to small messages (detections, keypoints, cones, camera info).
+pub const SMALL_MESSAGE_RING: usize = 8;
+
+/// The QoS of one stream.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct StreamQos {
+    /// What a publisher does when the network queue is full.
+    pub congestion_control: CongestionControl,
+    /// Zenoh priority of the samples.
+    pub priority: Priority,
+    /// Sent at once, without batching.
+    pub express: bool,
+    /// Capacity of a subscriber's ring channel.
+    pub subscriber_ring: usize,
+}
+
+impl StreamQos {
+    /// The QoS rules of `stream`.
+    pub fn of(stream: Stream) -> Self {
+        if stream.is_frame() {
+            Self {
+                congestion_control: CongestionControl::Drop,
+                priority: Priority::Data,
+                express: false,
+                subscriber_ring: FRAME_RING,
+            }
+        } else {
+            Self {
+                congestion_control: CongestionControl::Block,
+                priority: Priority::RealTime,
+                express: true,
+                subscriber_ring: SMALL_MESSAGE_RING,
+            }
+        }
+    }
+}
+
+/// A publisher on `camera`'s `stream`, with the stream's QoS and the protobuf encoding.
+pub async fn declare_publisher(
+    session: &Session,
+    topics: &Topics,
+    camera: &str,
+    stream: Stream,
+) -> Result<Publisher<'static>, BusError> {
+    let key = topics.key(camera, stream)?;
+    let qos = StreamQos::of(stream);
+    session
+        .declare_publisher(key.clone())
+        .encoding(Encoding::APPLICATION_PROTOBUF)
+        .congestion_control(qos.congestion_control)
+        .priority(qos.priority)
+        .express(qos.express)
+        .await
+        .map_err(|source| BusError::Declare {
+            role: "publisher",
+            key: key.to_string(),
+            source,
+        })
+}
+
+/// Encodes `message` and publishes it.
+pub async fn publish<M: prost::Message>(
+    publisher: &Publisher<'_>,
+    message: &M,
+) -> Result<(), BusError> {
+    publisher
+        .put(encode(message))
+        .await
+        .map_err(|source| BusError::Put {
+            key: publisher.key_expr().to_string(),
+            source,
+        })
+}
+
+/// A subscriber whose ring channel keeps only the newest samples.
+pub type RingSubscriber = Subscriber<RingChannelHandler<Sample>>;
+
+/// A subscriber to `key` (one camera's stream or [`Topics::all_cameras`]) carrying `stream`,
+/// with the stream's ring capacity: 1 for frames, [`SMALL_MESSAGE_RING`] otherwise.
+pub async fn declare_subscriber(
+    session: &Session,
+    key: KeyExpr<'static>,
+    stream: Stream,
+) -> Result<RingSubscriber, BusError> {
+    let ring = StreamQos::of(stream).subscriber_ring;
+    session
+        .declare_subscriber(key.clone())
+        .with(RingChannel::new(ring))
+        .await
+        .map_err(|source| BusError::Declare {
+            role: "subscriber",
+            key: key.to_string(),
+            source,
+        })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frames_drop_and_small_messages_block_express() {
+        let frame = StreamQos::of(Stream::Frame);
+        assert_eq!(frame.congestion_control, CongestionControl::Drop);
+        assert_eq!(frame.priority, Priority::Data);
+        assert!(!frame.express);
+        assert_eq!(frame.subscriber_ring, 1);
+        for stream in [
+            Stream::CameraInfo,
+            Stream::Detections,
+            Stream::Keypoints,
+            Stream::Cones,
+        ] {
+            let qos = StreamQos::of(stream);
+            assert_eq!(qos.congestion_control, CongestionControl::Block);
+            assert_eq!(qos.priority, Priority::RealTime);
+            assert!(qos.express);
+        }
+    }
+}

@@ -1,0 +1,168 @@
+//! Opening the Zenoh session from [`ZenohArgs`].
+
+use zenoh::{Config, Session};
+
+use crate::args::{ZenohArgs, ZenohMode};
+use crate::error::BusError;
+
+/// The Zenoh config of `args`: the config file (or Zenoh's defaults), then the flags given on
+/// top: mode (peer without a file), endpoints, multicast scouting (off without a file) and
+/// shared memory (Zenoh's default, on, unless turned off).
+pub fn zenoh_config(args: &ZenohArgs) -> Result<Config, BusError> {
+    let mut config = match &args.config {
+        Some(path) => Config::from_file(path).map_err(|source| BusError::ConfigFile {
+            path: path.clone(),
+            source,
+        })?,
+        None => Config::default(),
+    };
+    match (args.mode, &args.config) {
+        (Some(mode), _) => set(&mut config, "mode", json_string(mode.as_str()))?,
+        (None, None) => set(&mut config, "mode", json_string(ZenohMode::Peer.as_str()))?,
+        (None, Some(_)) => {}
+    }
+    if !args.connect.is_empty() {
+        set(&mut config, "connect/endpoints", json_list(&args.connect))?;
+    }
+    if !args.listen.is_empty() {
+        set(&mut config, "listen/endpoints", json_list(&args.listen))?;
+    }
+    match (args.multicast_scouting, &args.config) {
+        (Some(enabled), _) => set(
+            &mut config,
+            "scouting/multicast/enabled",
+            enabled.to_string(),
+        )?,
+        (None, None) => set(
+            &mut config,
+            "scouting/multicast/enabled",
+            "false".to_owned(),
+        )?,
+        (None, Some(_)) => {}
+    }
+    if let Some(enabled) = args.shared_memory {
+        set(
+            &mut config,
+            "transport/shared_memory/enabled",
+            enabled.to_string(),
+        )?;
+    }
+    Ok(config)
+}
+
+/// Opens the session described by `args`.
+pub async fn open_session(args: &ZenohArgs) -> Result<Session, BusError> {
+    let config = zenoh_config(args)?;
+    let session = zenoh::open(config)
+        .await
+        .map_err(|source| BusError::Open { source })?;
+    tracing::info!(
+        zid = %session.zid(),
+        mode = ?args.mode,
+        connect = ?args.connect,
+        listen = ?args.listen,
+        "zenoh session open"
+    );
+    Ok(session)
+}
+
+fn set(config: &mut Config, key: &'static str, value: String) -> Result<(), BusError> {
+    config
+        .insert_json5(key, &value)
+        .map_err(|source| BusError::ConfigValue { key, value, source })
+}
+
+fn json_string(value: &str) -> String {
+    serde_json::Value::String(value.to_owned()).to_string()
+}
+
+fn json_list(values: &[String]) -> String {
+    serde_json::Value::from(values.to_vec()).to_string()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn get(config: &Config, key: &str) -> String {
+        config.get_json(key).unwrap()
+    }
+
+    #[test]
+    fn defaults_are_peer_without_multicast() {
+        let config = zenoh_config(&ZenohArgs::default()).unwrap();
+        assert_eq!(get(&config, "mode"), "\"peer\"");
+        assert_eq!(get(&config, "scouting/multicast/enabled"), "false");
+    }
+
+    #[test]
+    fn flags_reach_the_config() {
+        let args = ZenohArgs {
+            mode: Some(ZenohMode::Client),
+            connect: vec!["tcp/127.0.0.1:7447".into()],
+            listen: vec!["tcp/127.0.0.1:0".into()],
+            multicast_scouting: Some(true),
+            shared_memory: Some(false),
+            ..ZenohArgs::default()
+        };
+        let config = zenoh_config(&args).unwrap();
+        assert_eq!(get(&config, "mode"), "\"client\"");
+        assert!(get(&config, "connect/endpoints").contains("tcp/127.0.0.1:7447"));
+        assert!(get(&config, "listen/endpoints").contains("tcp/127.0.0.1:0"));
+        assert_eq!(get(&config, "scouting/multicast/enabled"), "true");
+        assert_eq!(get(&config, "transport/shared_memory/enabled"), "false");
+    }
+
+    #[test]
+    fn bad_endpoint_and_missing_file_are_errors() {
+        let args = ZenohArgs {
+            connect: vec!["not an endpoint".into()],
+            ..ZenohArgs::default()
+        };
+        assert!(matches!(
+            zenoh_config(&args),
+            Err(BusError::ConfigValue {
+                key: "connect/endpoints",
+                ..
+            })
+        ));
+        let args = ZenohArgs {
+            config: Some("/nonexistent/zenoh.json5".into()),
+            ..ZenohArgs::default()
+        };
+        let error = zenoh_config(&args).unwrap_err();
+        assert!(
+            error.to_string().contains("/nonexistent/zenoh.json5"),
+            "{error}"
+        );
+    }
+
+    #[test]
+    fn config_file_is_read_and_flags_override_it() {
+        let dir = std::env::temp_dir().join(format!("conesight-bus-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("zenoh.json5");
+        std::fs::write(
+            &path,
+            r#"{ mode: "router", scouting: { multicast: { enabled: true } } }"#,
+        )
+        .unwrap();
+        let args = ZenohArgs {
+            config: Some(path.clone()),
+            ..ZenohArgs::default()
+        };
+        let config = zenoh_config(&args).unwrap();
+        // Without flags the file's values stay; a flag overrides the file.
+        assert_eq!(get(&config, "scouting/multicast/enabled"), "true");
+        assert_eq!(get(&config, "mode"), "\"router\"");
+        let args = ZenohArgs {
+            mode: Some(ZenohMode::Peer),
+            multicast_scouting: Some(false),
+            ..args
+        };
+        let config = zenoh_config(&args).unwrap();
+        assert_eq!(get(&config, "scouting/multicast/enabled"), "false");
+        assert_eq!(get(&config, "mode"), "\"peer\"");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}

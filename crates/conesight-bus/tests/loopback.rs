@@ -1,0 +1,183 @@
+//! Two real Zenoh peer sessions on 127.0.0.1 exchanging messages through the bus helpers.
+
+// Test helpers outside #[test] functions unwrap too.
+#![allow(clippy::unwrap_used)]
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::{Duration, Instant};
+
+use conesight_bus::zenoh::Session;
+use conesight_bus::zenoh::qos::{CongestionControl, Priority};
+use conesight_bus::{
+    Stream, Topics, ZenohArgs, declare_publisher, declare_subscriber, decode, open_session, publish,
+};
+use conesight_proto::pb;
+
+/// How long declarations may take to propagate between the two peers.
+const PROPAGATION_TIMEOUT: Duration = Duration::from_secs(10);
+
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+/// A listening peer and a peer connected to it, in a namespace of their own.
+async fn two_peers(namespace: &str) -> (Session, Session, Topics) {
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let base = ZenohArgs {
+        namespace: namespace.to_owned(),
+        ..ZenohArgs::default()
+    };
+    let listener = open_session(&ZenohArgs {
+        listen: vec![endpoint.clone()],
+        ..base.clone()
+    })
+    .await
+    .unwrap();
+    let connector = open_session(&ZenohArgs {
+        connect: vec![endpoint],
+        // Listen on loopback only too (Zenoh's default peer listener binds every interface).
+        listen: vec!["tcp/127.0.0.1:0".to_owned()],
+        ..base.clone()
+    })
+    .await
+    .unwrap();
+    (listener, connector, Topics::from_args(&base).unwrap())
+}
+
+fn frame(sequence: u64) -> pb::ImageFrame {
+    let image = image::RgbImage::from_pixel(64, 48, image::Rgb([sequence as u8, 1, 2]));
+    pb::ImageFrame::from_rgb(
+        pb::Header::new("front", sequence, 1_000 + sequence, "front_optical"),
+        &image,
+    )
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn two_peers_exchange_detections() {
+    let (publisher_session, subscriber_session, topics) = two_peers("test-exchange").await;
+    let subscriber = declare_subscriber(
+        &subscriber_session,
+        topics.all_cameras(Stream::Detections).unwrap(),
+        Stream::Detections,
+    )
+    .await
+    .unwrap();
+    let publisher = declare_publisher(&publisher_session, &topics, "front", Stream::Detections)
+        .await
+        .unwrap();
+    let mut header = pb::Header::new("front", 42, 7, "front_optical");
+    header.stamp_publish();
+    let message = pb::Detections {
+        header: Some(header),
+        detections: vec![pb::Detection {
+            class: pb::ConeClass::Blue.into(),
+            score: 0.5,
+            r#box: Some(pb::BoundingBox {
+                x_min_px: 1.0,
+                y_min_px: 2.0,
+                x_max_px: 3.0,
+                y_max_px: 4.0,
+            }),
+        }],
+    };
+
+    // Declarations propagate asynchronously: publish until the first sample arrives.
+    let started = Instant::now();
+    let sample = loop {
+        assert!(started.elapsed() < PROPAGATION_TIMEOUT, "no sample arrived");
+        publish(&publisher, &message).await.unwrap();
+        let wait = tokio::time::timeout(Duration::from_millis(100), subscriber.recv_async());
+        if let Ok(Ok(sample)) = wait.await {
+            break sample;
+        }
+    };
+    assert_eq!(decode::<pb::Detections>(sample.payload()).unwrap(), message);
+    assert_eq!(
+        topics.parse(sample.key_expr().as_str()),
+        Some(("front", Stream::Detections))
+    );
+    assert_eq!(sample.priority(), Priority::RealTime);
+    assert_eq!(sample.congestion_control(), CongestionControl::Block);
+    assert!(sample.express());
+
+    // Another run's namespace on the same network sees nothing of this one.
+    let other = Topics::new("test-exchange-other", "car").unwrap();
+    let stranger = declare_subscriber(
+        &subscriber_session,
+        other.all_cameras(Stream::Detections).unwrap(),
+        Stream::Detections,
+    )
+    .await
+    .unwrap();
+    publish(&publisher, &message).await.unwrap();
+    tokio::time::timeout(Duration::from_secs(2), subscriber.recv_async())
+        .await
+        .unwrap()
+        .unwrap();
+    assert!(stranger.try_recv().unwrap().is_none());
+
+    publisher_session.close().await.unwrap();
+    subscriber_session.close().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn slow_frame_subscriber_gets_the_newest_frame() {
+    let (publisher_session, subscriber_session, topics) = two_peers("test-ring").await;
+    let key = topics.key("front", Stream::Frame).unwrap();
+    let slow = declare_subscriber(&subscriber_session, key.clone(), Stream::Frame)
+        .await
+        .unwrap();
+    // A fast subscriber on the same session tells when a frame has been delivered to both.
+    let newest_delivered = Arc::new(AtomicU64::new(0));
+    let newest = newest_delivered.clone();
+    let _fast = subscriber_session
+        .declare_subscriber(key)
+        .callback(move |sample| {
+            if let Ok(frame) = decode::<pb::ImageFrame>(sample.payload()) {
+                let sequence = frame.header.map_or(0, |h| h.frame_sequence);
+                newest.fetch_max(sequence, Ordering::SeqCst);
+            }
+        })
+        .await
+        .unwrap();
+    let publisher = declare_publisher(&publisher_session, &topics, "front", Stream::Frame)
+        .await
+        .unwrap();
+
+    let started = Instant::now();
+    while newest_delivered.load(Ordering::SeqCst) == 0 {
+        assert!(started.elapsed() < PROPAGATION_TIMEOUT, "no frame arrived");
+        publish(&publisher, &frame(1)).await.unwrap();
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+
+    // The slow consumer reads nothing while 20 more frames go by.
+    const LAST: u64 = 21;
+    for sequence in 2..=LAST {
+        publish(&publisher, &frame(sequence)).await.unwrap();
+    }
+    let started = Instant::now();
+    while newest_delivered.load(Ordering::SeqCst) < LAST {
+        assert!(
+            started.elapsed() < PROPAGATION_TIMEOUT,
+            "frame {LAST} never arrived"
+        );
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
+
+    let sample = slow.recv_async().await.unwrap();
+    assert_eq!(sample.congestion_control(), CongestionControl::Drop);
+    assert_eq!(sample.priority(), Priority::Data);
+    let received = decode::<pb::ImageFrame>(sample.payload()).unwrap();
+    assert_eq!(received, frame(LAST));
+    assert_eq!(received.to_rgb().unwrap().get_pixel(0, 0).0[0], LAST as u8);
+    assert!(slow.try_recv().unwrap().is_none(), "older frames were kept");
+
+    publisher_session.close().await.unwrap();
+    subscriber_session.close().await.unwrap();
+}
