@@ -179,4 +179,15 @@ def test_horizon_follows_the_pitch(tmp_path):
         )
         got = horizon_from_calibration(tmp_path / "info.yaml", tmp_path / "ext.yaml")
         assert got == pytest.approx(want, abs=1e-6)
+    # conesight-core's current form: the camera body's rotation (pitch about vehicle y).
+    for text in (
+        f"vehicle_from_camera:\n  translation_m: [0, 0, 1]\n  rotation:\n"
+        f"    quaternion_xyzw: [0.0, {np.sin(pitch / 2)}, 0.0, {np.cos(pitch / 2)}]\n",
+        f"vehicle_from_camera:\n  translation_m: [0, 0, 1]\n  rotation:\n"
+        f"    rpy_rad: [0.0, {pitch}, 0.0]\n",
+        f"vehicle_from_camera: {{height_m: 1.0, pitch_down_rad: {pitch}}}\n",
+    ):
+        (tmp_path / "ext.yaml").write_text(text)
+        got = horizon_from_calibration(tmp_path / "info.yaml", tmp_path / "ext.yaml")
+        assert got == pytest.approx(600.0 - 2000.0 * np.tan(pitch), abs=1e-6), text
     assert band_top_from(600.0) == 600 - HORIZON_MARGIN_PX == BandParams().band_top_px

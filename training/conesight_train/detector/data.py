@@ -72,22 +72,64 @@ def read_rgb(path: Path) -> np.ndarray:
     return np.ascontiguousarray(bgr[:, :, ::-1])
 
 
+# Camera (OpenCV) axes -> vehicle axes for a camera looking straight ahead (conesight-core's
+# `Extrinsics::optical_to_vehicle_rotation`).
+OPTICAL_TO_VEHICLE = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+
+
+def rotation_from_quaternion(x: float, y: float, z: float, w: float) -> np.ndarray:
+    """3x3 rotation of a quaternion (normalised first)."""
+    n = np.sqrt(x * x + y * y + z * z + w * w)
+    x, y, z, w = x / n, y / n, z / n, w / n
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def rotation_from_rpy(roll: float, pitch: float, yaw: float) -> np.ndarray:
+    """ROS fixed-axis roll, pitch, yaw: Rz(yaw) Ry(pitch) Rx(roll)."""
+    cr, sr, cp, sp, cy, sy = (
+        np.cos(roll),
+        np.sin(roll),
+        np.cos(pitch),
+        np.sin(pitch),
+        np.cos(yaw),
+        np.sin(yaw),
+    )
+    rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]])
+    ry = np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
+    rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
+    return rz @ ry @ rx
+
+
+def vehicle_from_camera_rotation(pose: dict) -> np.ndarray:
+    """The rotation of an extrinsics file's `vehicle_from_camera`, in any of conesight-core's
+    forms: `rotation: {quaternion_xyzw | rpy_rad}` (camera body; optical axes composed on
+    top), `{height_m, pitch_down_rad}`, or the older full `rotation_xyzw`."""
+    if "rotation_xyzw" in pose:
+        return rotation_from_quaternion(*map(float, pose["rotation_xyzw"]))
+    if "pitch_down_rad" in pose:
+        body = rotation_from_rpy(0.0, float(pose["pitch_down_rad"]), 0.0)
+    elif "quaternion_xyzw" in pose["rotation"]:
+        body = rotation_from_quaternion(*map(float, pose["rotation"]["quaternion_xyzw"]))
+    else:
+        body = rotation_from_rpy(*map(float, pose["rotation"]["rpy_rad"]))
+    return body @ OPTICAL_TO_VEHICLE
+
+
 def horizon_from_calibration(camera_info: Path, extrinsics: Path) -> float:
     """The horizon row of a frame from its camera_info and extrinsics YAML (renderer format)."""
     try:
         info = yaml.safe_load(camera_info.read_text(encoding="utf-8"))
         k = info["camera_matrix"]["data"]
-        ext = yaml.safe_load(extrinsics.read_text(encoding="utf-8"))
-        qx, qy, qz, qw = ext["vehicle_from_camera"]["rotation_xyzw"]
+        pose = yaml.safe_load(extrinsics.read_text(encoding="utf-8"))["vehicle_from_camera"]
+        vehicle_from_camera = vehicle_from_camera_rotation(pose)
     except (OSError, KeyError, TypeError, ValueError, yaml.YAMLError) as err:
         raise LabelError(extrinsics, f"cannot read the calibration: {err!r}") from err
-    vehicle_from_camera = np.array(
-        [
-            [1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy - qz * qw), 2 * (qx * qz + qy * qw)],
-            [2 * (qx * qy + qz * qw), 1 - 2 * (qx * qx + qz * qz), 2 * (qy * qz - qx * qw)],
-            [2 * (qx * qz - qy * qw), 2 * (qy * qz + qx * qw), 1 - 2 * (qx * qx + qy * qy)],
-        ]
-    )
     return horizon_row_px(float(k[4]), float(k[5]), vehicle_from_camera.T)
 
 

@@ -1,0 +1,201 @@
+"""Evaluate a detector (checkpoint or ONNX + card) on labelled renderer frames, or draw its
+detections on unlabelled frames (e.g. the real amz sequence) with a count per frame.
+
+    python -m conesight_train.detector.evaluate --checkpoint build/train/detector/best.pt \\
+        --data out/sim-val --json build/detector-eval.json --png build/detector-eval --png-count 8
+    python -m conesight_train.detector.evaluate --onnx models/detector.onnx \\
+        --images ../shared/data/real-dev/amz-sequence --png build/amz [--band-top 420]
+
+Labelled: AP@0.5 per class and mAP, precision and recall at the card's score threshold,
+recall by distance band and within 20 m (difficult cones excluded; see `metrics.py`).
+Drawn PNGs show the band (grey lines), each detection (class colour, score) and, when
+labelled, missed truths (white).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections.abc import Callable
+from dataclasses import replace
+from pathlib import Path
+
+import cv2
+import numpy as np
+import onnxruntime as ort
+import torch
+from tqdm import tqdm
+
+from conesight_train.detector.augment import to_input
+from conesight_train.detector.band import BandParams
+from conesight_train.detector.data import IMAGE_SUFFIXES, LabelledFrame, RendererFrames, read_rgb
+from conesight_train.detector.metrics import ImageResult, evaluate, match
+from conesight_train.detector.model import CLASS_NAMES, ExportHead
+from conesight_train.detector.postprocess import Thresholds
+from conesight_train.detector.predict import detections_in_frame
+
+# Detections down to this score enter the AP computation.
+AP_SCORE_FLOOR = 0.02
+# Drawing colours (BGR for OpenCV) per class.
+CLASS_BGR = ((255, 90, 0), (0, 220, 255), (0, 120, 255), (0, 60, 200))
+
+Runner = Callable[[np.ndarray], np.ndarray]
+
+
+def torch_runner(checkpoint: Path) -> tuple[Runner, BandParams, Thresholds]:
+    """A checkpoint's model as input [1, 3, H, W] -> output [4 + C, N]."""
+    from conesight_train.detector.train import model_from_checkpoint
+
+    model, config, _ = model_from_checkpoint(checkpoint)
+    head = ExportHead(model).eval()
+
+    def run(x: np.ndarray) -> np.ndarray:
+        with torch.no_grad():
+            return head(torch.from_numpy(x)).numpy()[0]
+
+    return run, config.band, config.thresholds
+
+
+def onnx_runner(path: Path, threads: int) -> tuple[Runner, BandParams, Thresholds]:
+    """An exported model and its card."""
+    card_path = path.with_suffix(".card.json")
+    if not card_path.is_file():
+        raise SystemExit(f"{card_path}: missing; export with conesight_train.detector.onnx_export")
+    card = json.loads(card_path.read_text())
+    options = ort.SessionOptions()
+    options.intra_op_num_threads = threads
+    sess = ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
+    name = sess.get_inputs()[0].name
+
+    def run(x: np.ndarray) -> np.ndarray:
+        return sess.run(None, {name: x})[0][0]
+
+    return run, BandParams(**card["band"]), Thresholds(**card["thresholds"])
+
+
+def draw(
+    frame: LabelledFrame, dets: np.ndarray, top_px: int, band: BandParams, missed: np.ndarray
+) -> np.ndarray:
+    """BGR image with the band, detections and missed truths."""
+    image = np.ascontiguousarray(frame.image_rgb[:, :, ::-1])
+    width = image.shape[1]
+    for row in (top_px, top_px + band.band_height_px - 1):
+        cv2.line(image, (0, row), (width - 1, row), (160, 160, 160), 1)
+    for box in frame.boxes_px[missed]:
+        x0, y0, x1, y1 = np.round(box).astype(int)
+        cv2.rectangle(image, (x0, y0), (x1, y1), (255, 255, 255), 2)
+    for d in dets:
+        x0, y0, x1, y1 = np.round(d[:4]).astype(int)
+        colour = CLASS_BGR[int(d[5])]
+        cv2.rectangle(image, (x0, y0), (x1, y1), colour, 2)
+        cv2.putText(
+            image, f"{d[4]:.2f}", (x0, max(y0 - 3, 10)), cv2.FONT_HERSHEY_SIMPLEX, 0.45, colour, 1
+        )
+    return image
+
+
+def run_frames(
+    frames: list[LabelledFrame] | RendererFrames,
+    runner: Runner,
+    band: BandParams,
+    thresholds: Thresholds,
+    png_dir: Path | None,
+    png_count: int,
+) -> list[ImageResult]:
+    """Detections (down to AP_SCORE_FLOOR) per frame; draws the first `png_count` frames."""
+    low = replace(thresholds, score_threshold=min(AP_SCORE_FLOOR, thresholds.score_threshold))
+    results = []
+    for i in tqdm(range(len(frames)), desc="frames"):
+        frame = frames[i]
+        sample = to_input(frame, band)
+        out = runner(sample.image[None])
+        dets = detections_in_frame(out, band, sample.top_px, low)
+        result = ImageResult(
+            dets, frame.boxes_px, frame.classes, frame.range_m, frame.difficult_mask()
+        )
+        results.append(result)
+        if png_dir is not None and i < png_count:
+            shown = dets[dets[:, 4] >= thresholds.score_threshold]
+            _, matched_by = match(result, 0.5)
+            missed = (matched_by < 0) & ~frame.difficult_mask()
+            if len(matched_by):
+                ok = matched_by >= 0
+                missed[ok] = dets[matched_by[ok], 4] < thresholds.score_threshold
+            png_dir.mkdir(parents=True, exist_ok=True)
+            cv2.imwrite(
+                str(png_dir / f"{frame.name}.png"),
+                draw(frame, shown, sample.top_px, band, missed),
+            )
+    return results
+
+
+def unlabelled_frames(folder: Path, band_top_px: int | None) -> list[LabelledFrame]:
+    """Every image of a folder, without labels."""
+    paths = sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
+    if not paths:
+        raise SystemExit(f"{folder}: no images")
+    empty = np.zeros((0, 4))
+    return [
+        LabelledFrame(
+            read_rgb(p), empty, np.zeros(0, np.int64), np.zeros(0), p.stem, None, band_top_px
+        )
+        for p in paths
+    ]
+
+
+def print_metrics(metrics: dict[str, object]) -> None:
+    """A readable summary."""
+    print(
+        f"mAP@0.5 {metrics['map50']:.3f}  precision {metrics['precision']:.3f}  "
+        f"recall {metrics['recall']:.3f}  recall within 20 m {metrics['recall_within_20m']:.3f}"
+    )
+    for name, row in metrics["per_class"].items():  # type: ignore[union-attr]
+        print(f"  {name:<13} AP@0.5 {row['ap50']:.3f}  ({row['truths']} cones)")
+    for band, row in metrics["recall_by_range"].items():  # type: ignore[union-attr]
+        print(f"  {band:<9} recall {row['recall']:.3f}  ({row['truths']} cones)")
+
+
+def main(argv: list[str] | None = None) -> None:
+    """CLI entry point."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    model = parser.add_mutually_exclusive_group(required=True)
+    model.add_argument("--checkpoint", type=Path)
+    model.add_argument("--onnx", type=Path)
+    data = parser.add_mutually_exclusive_group(required=True)
+    data.add_argument("--data", type=Path, help="labelled renderer folder")
+    data.add_argument("--images", type=Path, help="folder of unlabelled frames")
+    parser.add_argument("--limit", type=int)
+    parser.add_argument("--band-top", type=int, help="band's first row for unlabelled frames")
+    parser.add_argument("--json", type=Path)
+    parser.add_argument("--png", type=Path, help="folder for annotated frames")
+    parser.add_argument("--png-count", type=int, default=1000)
+    parser.add_argument("--threads", type=int, default=1)
+    args = parser.parse_args(argv)
+    torch.set_num_threads(args.threads)
+    if args.checkpoint:
+        runner, band, thresholds = torch_runner(args.checkpoint)
+    else:
+        runner, band, thresholds = onnx_runner(args.onnx, args.threads)
+    if args.data:
+        source = RendererFrames(args.data, args.limit)
+        results = run_frames(source, runner, band, thresholds, args.png, args.png_count)
+        report: dict[str, object] = evaluate(results, CLASS_NAMES, thresholds.score_threshold)
+        report["frames"] = len(results)
+        print_metrics(report)
+    else:
+        frames = unlabelled_frames(args.images, args.band_top)[: args.limit]
+        results = run_frames(frames, runner, band, thresholds, args.png, args.png_count)
+        counts = {}
+        for frame, result in zip(frames, results, strict=True):
+            shown = result.detections[result.detections[:, 4] >= thresholds.score_threshold]
+            per_class = {n: int(np.sum(shown[:, 5] == c)) for c, n in enumerate(CLASS_NAMES)}
+            counts[frame.name] = {"total": len(shown), **per_class}
+            print(f"{frame.name}: {len(shown)} cones {per_class}")
+        report = {"frames": len(frames), "counts": counts}
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(report, indent=2) + "\n")
+
+
+if __name__ == "__main__":
+    main()
