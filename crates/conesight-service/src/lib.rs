@@ -1,0 +1,37 @@
+//! # conesight-service
+//!
+//! What every conesight service shares, so each `main.rs` stays thin.
+//!
+//! Modules:
+//! - `telemetry`: [`init_tracing`] from `RUST_LOG` (default `info`).
+//! - `shutdown`: [`shutdown_signal`], resolving on SIGTERM or SIGINT.
+//! - [`metrics`]: [`Metrics`], a Prometheus registry with frames received/processed/dropped,
+//!   errors by kind, per-stage latency histograms and the queue depth.
+//! - [`health`]: [`Readiness`], the shared state behind `/readyz` (model loaded, session up,
+//!   last input fresh).
+//! - [`http`]: [`router`] (`/livez`, `/readyz`, `/metrics`), [`HttpArgs`] and [`serve`].
+//! - [`healthcheck`]: [`healthcheck()`], an HTTP GET of `/readyz` for containers without curl.
+//! - [`errors`]: [`ErrorReporter`], counting every error by kind and logging at most one per
+//!   kind per interval.
+//! - [`worker`]: [`Worker`], heavy work on its own thread fed by a slot of 1 (newest wins).
+//!
+//! Entry point in a service's `main`: `init_tracing()`, bind [`HttpArgs::addr`], spawn
+//! `serve(listener, router(state), shutdown)`, run the pipeline until [`shutdown_signal`].
+
+pub mod errors;
+pub mod health;
+pub mod healthcheck;
+pub mod http;
+pub mod metrics;
+mod shutdown;
+mod telemetry;
+pub mod worker;
+
+pub use errors::ErrorReporter;
+pub use health::{Readiness, ReadinessReport};
+pub use healthcheck::{HealthcheckArgs, HealthcheckError, healthcheck};
+pub use http::{HttpArgs, HttpState, router, serve};
+pub use metrics::Metrics;
+pub use shutdown::shutdown_signal;
+pub use telemetry::init_tracing;
+pub use worker::Worker;

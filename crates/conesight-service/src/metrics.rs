@@ -1,0 +1,184 @@
+//! [`Metrics`]: the Prometheus metrics every service exports on `/metrics`.
+//!
+//! | metric | type | labels |
+//! | --- | --- | --- |
+//! | `conesight_frames_received_total` | counter | |
+//! | `conesight_frames_processed_total` | counter | |
+//! | `conesight_frames_dropped_total` | counter | |
+//! | `conesight_errors_total` | counter | `kind` |
+//! | `conesight_stage_latency_seconds` | histogram | `stage` |
+//! | `conesight_queue_depth` | gauge | |
+
+use std::time::Duration;
+
+use prometheus_client::encoding::text::encode;
+use prometheus_client::metrics::counter::Counter;
+use prometheus_client::metrics::family::Family;
+use prometheus_client::metrics::gauge::Gauge;
+use prometheus_client::metrics::histogram::{Histogram, exponential_buckets};
+use prometheus_client::registry::Registry;
+
+/// Prefix of every metric name.
+pub const METRIC_PREFIX: &str = "conesight";
+/// Smallest latency bucket, seconds (100 us).
+pub const LATENCY_BUCKET_START_SECS: f64 = 1e-4;
+/// Ratio between consecutive latency buckets.
+pub const LATENCY_BUCKET_FACTOR: f64 = 2.0;
+/// Number of latency buckets (100 us .. ~3.3 s).
+pub const LATENCY_BUCKET_COUNT: u16 = 16;
+
+/// A label set with one label.
+type OneLabel = [(&'static str, &'static str); 1];
+
+fn latency_histogram() -> Histogram {
+    Histogram::new(exponential_buckets(
+        LATENCY_BUCKET_START_SECS,
+        LATENCY_BUCKET_FACTOR,
+        LATENCY_BUCKET_COUNT,
+    ))
+}
+
+/// The metrics of one service. Cheap to share (`Arc<Metrics>`); every method takes `&self`.
+#[derive(Debug)]
+pub struct Metrics {
+    registry: Registry,
+    frames_received: Counter,
+    frames_processed: Counter,
+    frames_dropped: Counter,
+    errors: Family<OneLabel, Counter>,
+    stage_latency: Family<OneLabel, Histogram, fn() -> Histogram>,
+    queue_depth: Gauge,
+}
+
+impl Default for Metrics {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Metrics {
+    /// A registry with every metric registered at zero.
+    pub fn new() -> Self {
+        let mut registry = Registry::with_prefix(METRIC_PREFIX);
+        let frames_received = Counter::default();
+        let frames_processed = Counter::default();
+        let frames_dropped = Counter::default();
+        let errors = Family::<OneLabel, Counter>::default();
+        let stage_latency = Family::<OneLabel, Histogram, fn() -> Histogram>::new_with_constructor(
+            latency_histogram,
+        );
+        let queue_depth = Gauge::default();
+        registry.register(
+            "frames_received",
+            "Input messages received from the bus",
+            frames_received.clone(),
+        );
+        registry.register(
+            "frames_processed",
+            "Inputs fully processed and published",
+            frames_processed.clone(),
+        );
+        registry.register(
+            "frames_dropped",
+            "Inputs dropped unprocessed (replaced by a newer one or rejected)",
+            frames_dropped.clone(),
+        );
+        registry.register("errors", "Errors by kind", errors.clone());
+        registry.register(
+            "stage_latency_seconds",
+            "Time spent per pipeline stage",
+            stage_latency.clone(),
+        );
+        registry.register(
+            "queue_depth",
+            "Inputs waiting for the worker",
+            queue_depth.clone(),
+        );
+        Self {
+            registry,
+            frames_received,
+            frames_processed,
+            frames_dropped,
+            errors,
+            stage_latency,
+            queue_depth,
+        }
+    }
+
+    /// Counts one input received.
+    pub fn frame_received(&self) {
+        self.frames_received.inc();
+    }
+
+    /// Counts one input processed and published.
+    pub fn frame_processed(&self) {
+        self.frames_processed.inc();
+    }
+
+    /// Counts one input dropped.
+    pub fn frame_dropped(&self) {
+        self.frames_dropped.inc();
+    }
+
+    /// Counts one error of `kind` (a short stable name such as `malformed_protobuf`).
+    pub fn error(&self, kind: &'static str) {
+        self.errors.get_or_create(&[("kind", kind)]).inc();
+    }
+
+    /// Records the time spent in `stage` (e.g. `decode`, `inference`, `pnp`, `end_to_end`).
+    pub fn observe_stage(&self, stage: &'static str, elapsed: Duration) {
+        self.stage_latency
+            .get_or_create(&[("stage", stage)])
+            .observe(elapsed.as_secs_f64());
+    }
+
+    /// Sets the number of inputs waiting for the worker.
+    pub fn set_queue_depth(&self, depth: i64) {
+        self.queue_depth.set(depth);
+    }
+
+    /// Errors of `kind` counted so far.
+    pub fn error_count(&self, kind: &'static str) -> u64 {
+        self.errors.get_or_create(&[("kind", kind)]).get()
+    }
+
+    /// The metrics in the Prometheus (OpenMetrics) text format.
+    pub fn encode(&self) -> String {
+        let mut text = String::new();
+        // Writing into a String cannot fail.
+        let _ = encode(&mut text, &self.registry);
+        text
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn text_has_every_metric_with_values() {
+        let metrics = Metrics::new();
+        metrics.frame_received();
+        metrics.frame_received();
+        metrics.frame_processed();
+        metrics.frame_dropped();
+        metrics.error("malformed_protobuf");
+        metrics.observe_stage("inference", Duration::from_millis(3));
+        metrics.set_queue_depth(1);
+        let text = metrics.encode();
+        for line in [
+            "conesight_frames_received_total 2",
+            "conesight_frames_processed_total 1",
+            "conesight_frames_dropped_total 1",
+            "conesight_errors_total{kind=\"malformed_protobuf\"} 1",
+            "conesight_stage_latency_seconds_count{stage=\"inference\"} 1",
+            "conesight_stage_latency_seconds_bucket{le=\"0.0016\",stage=\"inference\"} 0",
+            "conesight_stage_latency_seconds_bucket{le=\"0.0032\",stage=\"inference\"} 1",
+            "conesight_queue_depth 1",
+        ] {
+            assert!(text.contains(line), "missing {line:?} in\n{text}");
+        }
+        assert_eq!(metrics.error_count("malformed_protobuf"), 1);
+        assert!(text.ends_with("# EOF\n"));
+    }
+}
