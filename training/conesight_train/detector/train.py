@@ -102,7 +102,11 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True) -> d
     dataset = DetectorDataset(
         open_source(config.train), config.band, augment=True, seed=config.seed
     )
-    per_epoch = max(1, math.ceil(len(dataset) / config.batch_size))
+    if len(dataset) == 0:
+        raise ValueError(f"{config.train}: no training frames")
+    # Full batches only (a last short batch would skew batch norm), unless the set is tiny.
+    drop_last = len(dataset) >= config.batch_size
+    per_epoch = len(dataset) // config.batch_size if drop_last else 1
     bar = tqdm(total=config.steps, initial=step, disable=not progress, desc="detector")
     t0 = time.perf_counter()
     while step < config.steps:
@@ -115,7 +119,7 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True) -> d
             torch.utils.data.Subset(dataset, order[batch_in_epoch * config.batch_size :].tolist()),
             batch_size=config.batch_size,
             num_workers=config.workers,
-            drop_last=len(dataset) >= config.batch_size,
+            drop_last=drop_last,
         )
         for images, targets in loader:
             model.train()
