@@ -38,12 +38,13 @@ pub struct BandParams {
 }
 
 impl Default for BandParams {
-    /// The shipped scheme: rows 560..1200 of a 1920x1200 frame, halved to 960x320.
+    /// The shipped scheme: 768 rows from 560 (clamped to 432..1200 in a 1920x1200 frame),
+    /// halved to 960x384.
     fn default() -> Self {
         Self {
             band_top_px: 560,
             input_width_px: 960,
-            input_height_px: 320,
+            input_height_px: 384,
             factor: 2,
         }
     }

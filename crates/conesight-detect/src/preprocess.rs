@@ -227,7 +227,7 @@ mod tests {
         let err = band_input(&gradient(1280, 720), &band).unwrap_err();
         assert!(err.to_string().contains("1920 px wide"), "{err}");
         let err = band_input(&gradient(1920, 600), &band).unwrap_err();
-        assert!(err.to_string().contains("at least 640 rows"), "{err}");
+        assert!(err.to_string().contains("at least 768 rows"), "{err}");
     }
 
     #[test]

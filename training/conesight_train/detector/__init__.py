@@ -2,7 +2,8 @@
 
 Modules, in data-flow order:
 - `band`: the input scheme, defined once (rows around and below the horizon, box-averaged by
-  an integer factor; default 1920x1200 -> rows 560..1200 -> 960x320), and the box mapping.
+  an integer factor; default 1920x1200 -> 768 rows from 40 px above the horizon -> 960x384),
+  and the box mapping.
 - `data`: labelled frames from the renderer (annotations/*.json or labels/*.txt) and toy frames.
 - `augment`: band jitter, scale, horizontal flip, photometric; frame -> network input.
 - `targets`, `loss`: tall Gaussian heatmap targets, focal + L1 loss.

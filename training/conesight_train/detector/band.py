@@ -12,10 +12,12 @@ below it (f = 2048 px), at 30 m a few px. The detector therefore sees only a ban
 1080-row frame uses its lowest rows when the band would overrun). The first row comes from
 the camera calibration when known: `top = horizon row - HORIZON_MARGIN_PX` (`band_top_from`;
 the horizon row is where the vehicle's forward direction projects, so pitch moves the band
-with the horizon); otherwise `band_top_px`, the level paper camera's value. 640 rows below the
-horizon reach ground points at f h / 600 = 3.4 m (f = 2048 px, h = 1 m). The frame width must
-equal `factor * input_width`. Defaults: 1920x1200 frames, band rows 560..1200 (40 px above the
-horizon of a level camera at cy = 600), factor 2 -> a 960x320 input (0.31 MPx).
+with the horizon); otherwise `band_top_px`, the level paper camera's value. The 728 rows below
+the horizon reach ground points at f h / 728 = 2.8 m (f = 2048 px, h = 1 m; 3.5 m for the
+renderer's highest mount, 1.25 m): with 640 rows, 3 of 40 cones within 20 m in rendered frames
+reached below the band. The frame width must equal `factor * input_width`. Defaults: 1920x1200
+frames, 768 band rows from 560 (40 px above the horizon of a level camera at cy = 600; clamped
+to 432..1200), factor 2 -> a 960x384 input (0.37 MPx).
 
 Coordinates follow OpenCV (pixel i centred at i; box edges are continuous). Input -> frame:
 `x = (x_in + 0.5) * factor - 0.5`, `y = (y_in + 0.5) * factor - 0.5 + top`.
@@ -53,7 +55,7 @@ class BandParams:
 
     band_top_px: int = 560
     input_width_px: int = 960
-    input_height_px: int = 320
+    input_height_px: int = 384
     factor: int = 2
 
     @property

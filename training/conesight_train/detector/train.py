@@ -180,7 +180,7 @@ def parse_args(argv: list[str] | None) -> tuple[TrainConfig, bool]:
     parser.add_argument("--threads", type=int)
     parser.add_argument("--workers", type=int)
     parser.add_argument("--val-every", type=int)
-    parser.add_argument("--band-input", help="WxH of the network input, e.g. 960x320")
+    parser.add_argument("--band-input", help="WxH of the network input, e.g. 960x384")
     parser.add_argument("--band-top", type=int, help="first frame row of the band")
     parser.add_argument("--resume", action="store_true")
     args = parser.parse_args(argv)
