@@ -78,6 +78,15 @@ pub enum DetectError {
         /// Index of the first one.
         first: usize,
     },
+    /// The calibrated camera does not look forward, so the horizon is not in the image.
+    #[error(
+        "the camera's forward direction has z = {forward_z:.3} in the camera frame, so the \
+         horizon is not in the image; check the extrinsics or set DetectorConfig::band_top_px"
+    )]
+    NoHorizon {
+        /// z of the vehicle's forward axis in the camera frame (must be positive).
+        forward_z: f64,
+    },
     /// A threshold is outside its range.
     #[error("threshold `{name}` = {value} is outside {range}")]
     BadThreshold {

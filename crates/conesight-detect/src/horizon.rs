@@ -18,11 +18,8 @@ pub const HORIZON_MARGIN_PX: f64 = 40.0;
 pub fn horizon_row_px(camera: &Camera, extrinsics: &Extrinsics) -> Result<f64, DetectError> {
     let forward_in_camera = extrinsics.camera_from_vehicle().rotation * Vector3::x();
     if forward_in_camera.z <= 1e-6 {
-        return Err(DetectError::CardInvalid {
-            model: "camera calibration".to_owned(),
-            problem: "the camera does not look forward, so the horizon is not in the image; \
-                      set DetectorConfig::band_top_px by hand"
-                .to_owned(),
+        return Err(DetectError::NoHorizon {
+            forward_z: forward_in_camera.z,
         });
     }
     Ok(camera.cy_px + camera.fy_px * forward_in_camera.y / forward_in_camera.z)
@@ -53,5 +50,12 @@ mod tests {
         let row = horizon_row_px(&camera, &Extrinsics::from_height_pitch(1.0, 0.1)).unwrap();
         let want = camera.cy_px - camera.fy_px * 0.1f64.tan();
         assert!((row - want).abs() < 1e-6, "{row} vs {want}");
+    }
+
+    #[test]
+    fn a_camera_looking_up_has_no_horizon() {
+        let extrinsics = Extrinsics::from_height_pitch(1.0, -1.7);
+        let err = horizon_row_px(&Camera::paper_default(), &extrinsics).unwrap_err();
+        assert!(matches!(err, DetectError::NoHorizon { .. }), "{err}");
     }
 }
