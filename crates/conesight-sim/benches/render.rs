@@ -2,7 +2,8 @@
 //! `cargo bench -p conesight-sim --bench render` (FRAMES=N to change the count, default 20).
 //!
 //! Prints wall-clock frames/s and, because this machine is shared, also the process CPU time
-//! per frame (Linux `/proc/self/stat`) and the frames/s that CPU time allows on idle cores.
+//! per frame (Linux `/proc/self/stat`), the parallel efficiency (CPU time over threads x wall
+//! time) and the frames/s that CPU time allows on idle cores.
 
 use std::time::Instant;
 
@@ -42,9 +43,13 @@ fn measure(
     let cpu = match (cpu0, cpu_seconds()) {
         (Some(a), Some(b)) => {
             let per_frame = (b - a) / frames as f64;
+            // Parallel efficiency: the share of `threads x wall` spent computing (below 1 when
+            // other processes hold the cores or the threads wait for each other).
+            let efficiency = (b - a) / (wall * threads as f64);
             format!(
-                "  cpu {:5.0} ms/frame -> {:5.2} frames/s on {threads} idle cores",
+                "  cpu {:5.0} ms/frame  parallel efficiency {:4.0}%  -> {:5.2} frames/s on {threads} idle cores",
                 per_frame * 1e3,
+                efficiency * 1e2,
                 threads as f64 / per_frame
             )
         }
@@ -101,6 +106,8 @@ fn main() -> anyhow::Result<()> {
             })
         },
     )?;
-    println!("target                  10.00 frames/s");
+    let load = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
+    let load = load.split_whitespace().next().unwrap_or("?");
+    println!("target                  10.00 frames/s   (load average {load})");
     Ok(())
 }

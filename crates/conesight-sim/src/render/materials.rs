@@ -137,6 +137,14 @@ pub fn ground_albedo(
     let fp = f64::from(footprint_m);
     for line in &env.lines {
         let half = 0.5 * line.width_m;
+        let reach = half + fp;
+        if x_m < line.from_m.x.min(line.to_m.x) - reach
+            || x_m > line.from_m.x.max(line.to_m.x) + reach
+            || y_m < line.from_m.y.min(line.to_m.y) - reach
+            || y_m > line.from_m.y.max(line.to_m.y) + reach
+        {
+            continue;
+        }
         let d = distance_to_segment(
             x_m,
             y_m,

@@ -5,7 +5,7 @@
 //! - [`materials`]: albedo of cones (stripes, dirt, scuffs), distractors and ground.
 //! - [`texture`]: multi-octave value noise.
 //! - [`light`]: sky, shading, ground shadows.
-//! - [`post`]: camera effects and tone mapping.
+//! - [`post`]: camera effects and tone mapping; [`jpeg`]: JPEG artefacts.
 //!
 //! Entry: [`Renderer::new`] (per camera: builds the per-pixel ray table, undistorting once),
 //! then [`Renderer::render`] per scene. Rows are rendered in parallel; the result does not
@@ -13,6 +13,7 @@
 //! coordinate `(col, row)` (OpenCV convention); pixels where the object id changes are
 //! re-rendered with 4 sub-samples (anti-aliasing). The object-id buffer keeps the centre sample.
 
+pub mod jpeg;
 pub mod light;
 pub mod materials;
 pub mod post;
@@ -55,8 +56,21 @@ pub struct Renderer {
     rays: Vec<[f32; 2]>,
     fov: FieldOfView,
     textures: std::sync::Arc<Textures>,
+    /// Radiance buffers of finished frames, reused (fresh pages cost page faults and zeroing).
+    scratch: std::sync::Arc<std::sync::Mutex<Vec<Scratch>>>,
 }
 
+/// Per-frame working buffers; every element is overwritten before it is read.
+#[derive(Debug, Default)]
+struct Scratch {
+    /// Linear radiance per pixel.
+    linear: Vec<[f32; 3]>,
+    /// Background radiance on the shading grid.
+    grid: Vec<[f32; 3]>,
+}
+
+/// Range of the per-frame texture offsets, metres.
+const TEXTURE_OFFSET_RANGE_M: f32 = 960.0;
 /// Key of the textures baked once per renderer (frames differ by texture offsets).
 const TEXTURE_KEY: u64 = 0x5EED_C0DE;
 
@@ -148,6 +162,7 @@ impl Renderer {
             rays,
             fov: FieldOfView::from_border(min, max),
             textures: std::sync::Arc::new(Textures::new(TEXTURE_KEY)),
+            scratch: Default::default(),
         })
     }
 
@@ -193,27 +208,36 @@ impl Renderer {
             self.camera.width_px as usize,
             self.camera.height_px as usize,
         );
-        let mut linear = vec![[0.0_f32; 3]; w * h];
+        let mut scratch = self
+            .scratch
+            .lock()
+            .ok()
+            .and_then(|mut pool| pool.pop())
+            .unwrap_or_default();
+        let linear = &mut scratch.linear;
+        linear.resize(w * h, [0.0; 3]);
         let mut ids = vec![BACKGROUND_ID; w * h];
         let cone_count = frame.cone_count as usize;
         // Pass 0: ground and sky radiance on a grid of every BACKGROUND_STEP pixels (they vary
         // slowly; objects are always shaded per pixel, edges re-sampled in pass 2).
         let grid_w = (w - 1) / BACKGROUND_STEP + 2;
         let grid_h = (h - 1) / BACKGROUND_STEP + 2;
-        let grid: Vec<[f32; 3]> = (0..grid_h)
-            .into_par_iter()
-            .flat_map_iter(|gy| {
+        let grid = &mut scratch.grid;
+        grid.resize(grid_w * grid_h, [0.0; 3]);
+        grid.par_chunks_mut(grid_w)
+            .enumerate()
+            .for_each(|(gy, grid_row)| {
                 let row = (gy * BACKGROUND_STEP).min(h - 1);
                 let tiles = frame.row_tiles(row as i64, row as i64, w);
-                let frame = &frame;
-                (0..grid_w).map(move |gx| {
+                for (gx, value) in grid_row.iter_mut().enumerate() {
                     let col = (gx * BACKGROUND_STEP).min(w - 1);
                     let n = self.rays[row * w + col];
                     let ray = Vector3::new(f64::from(n[0]), f64::from(n[1]), 1.0);
-                    frame.background(&ray, col as i64, &tiles[col / TILE_PX].1)
-                })
-            })
-            .collect();
+                    *value = frame.background(&ray, col as i64, &tiles[col / TILE_PX].1);
+                }
+            });
+        let grid = &scratch.grid;
+        let linear = &mut scratch.linear;
         // Pass 1: objects per pixel, background interpolated from the grid; count unoccluded
         // cone hits per row.
         let unoccluded: Vec<Vec<(u32, u64)>> = linear
@@ -239,17 +263,17 @@ impl Renderer {
                         ]
                     })
                     .collect();
-                for (col, colour) in colours.iter_mut().enumerate() {
-                    let gx = col / BACKGROUND_STEP;
-                    let fx = (col % BACKGROUND_STEP) as f32 / BACKGROUND_STEP as f32;
-                    let (a, b) = (blended[gx], blended[gx + 1]);
-                    *colour = [
-                        a[0] + (b[0] - a[0]) * fx,
-                        a[1] + (b[1] - a[1]) * fx,
-                        a[2] + (b[2] - a[2]) * fx,
-                    ];
+                for (span, pair) in colours.chunks_mut(BACKGROUND_STEP).zip(blended.windows(2)) {
+                    let (a, b) = (pair[0], pair[1]);
+                    for (k, colour) in span.iter_mut().enumerate() {
+                        let fx = k as f32 / BACKGROUND_STEP as f32;
+                        *colour = [
+                            a[0] + (b[0] - a[0]) * fx,
+                            a[1] + (b[1] - a[1]) * fx,
+                            a[2] + (b[2] - a[2]) * fx,
+                        ];
+                    }
                 }
-                row_ids.fill(BACKGROUND_ID);
                 // Objects: only in column tiles that have any.
                 for (tile, (active, _)) in tiles.iter().enumerate() {
                     if active.is_empty() {
@@ -280,12 +304,18 @@ impl Renderer {
             .enumerate()
             .for_each(|(row, colours)| {
                 let tiles = frame.row_tiles(row as i64 - 1, row as i64 + 1, w);
+                let line = |r: usize| &ids_ref[r * w..(r + 1) * w];
+                let (here, above, below) = (
+                    line(row),
+                    line(row.saturating_sub(1)),
+                    line((row + 1).min(h - 1)),
+                );
                 for col in 0..w {
-                    let id = ids_ref[row * w + col];
-                    let differs = (col + 1 < w && ids_ref[row * w + col + 1] != id)
-                        || (col > 0 && ids_ref[row * w + col - 1] != id)
-                        || (row + 1 < h && ids_ref[(row + 1) * w + col] != id)
-                        || (row > 0 && ids_ref[(row - 1) * w + col] != id);
+                    let id = here[col];
+                    let differs = above[col] != id
+                        || below[col] != id
+                        || here[(col + 1).min(w - 1)] != id
+                        || here[col.saturating_sub(1)] != id;
                     if !differs {
                         continue;
                     }
@@ -321,11 +351,15 @@ impl Renderer {
             });
         }
         let image = post::finish(
-            &mut linear,
+            linear,
             self.camera.width_px,
             self.camera.height_px,
             &scene.effects,
-        )?;
+        );
+        if let Ok(mut pool) = self.scratch.lock() {
+            pool.push(scratch);
+        }
+        let image = image?;
         Ok(Rendered {
             image,
             object_ids: ids,
@@ -496,9 +530,10 @@ impl Renderer {
             tex: &self.textures,
             offset: {
                 let k = world.environment.texture_key;
+                // Under a kilometre, so f32 texture coordinates keep sub-texel precision.
                 [
-                    (k & 0xFFFF) as f32 * 0.37,
-                    ((k >> 16) & 0xFFFF) as f32 * 0.37,
+                    (k & 0xFFFF) as f32 * 0.37 % TEXTURE_OFFSET_RANGE_M,
+                    ((k >> 16) & 0xFFFF) as f32 * 0.37 % TEXTURE_OFFSET_RANGE_M,
                 ]
             },
             cone_count,

@@ -1,8 +1,10 @@
 //! Camera effects on the linear radiance buffer, then tone mapping to 8-bit sRGB: exposure,
 //! vignetting, defocus (box blur), motion blur (directional), sensor noise (shot + read, from a
-//! per-pixel hash so it is thread-independent), and JPEG artefacts (encode/decode round trip).
+//! per-pixel hash so it is thread-independent), and JPEG artefacts ([`super::jpeg`]).
 
-use image::{RgbImage, codecs::jpeg::JpegEncoder};
+use std::sync::OnceLock;
+
+use image::RgbImage;
 use rayon::prelude::*;
 
 use crate::{error::SimError, rng::mix64, scene::CameraEffects};
@@ -14,6 +16,11 @@ const LUT_SIZE: usize = 1 << 15;
 /// Table entries per unit of linear radiance (the table covers [0, 8)).
 const LUT_PER_UNIT: f32 = (LUT_SIZE / 8) as f32;
 
+/// Entries of the sensor-noise standard deviation table over linear radiance [0, 8).
+const SIGMA_SIZE: usize = 1024;
+/// Display-table index >> SIGMA_SHIFT = sigma-table index.
+const SIGMA_SHIFT: u32 = (LUT_SIZE / SIGMA_SIZE).trailing_zeros();
+
 /// Applies the effects to `linear` (row-major, `width` x `height`) and returns the 8-bit image.
 pub fn finish(
     linear: &mut [[f32; 3]],
@@ -24,8 +31,7 @@ pub fn finish(
     let (w, h) = (width as usize, height as usize);
     if effects.defocus_px >= 0.5 {
         let radius = effects.defocus_px.round() as usize;
-        box_blur(linear, w, h, radius, true);
-        box_blur(linear, w, h, radius, false);
+        box_blur(linear, w, h, radius);
     }
     if effects.motion_blur_px >= 1.0 {
         motion_blur(
@@ -36,42 +42,55 @@ pub fn finish(
             effects.motion_blur_angle_rad,
         );
     }
-    let lut = display_lut();
+    let lut = DISPLAY_LUT.get_or_init(display_lut);
     let (cx, cy) = (0.5 * w as f32, 0.5 * h as f32);
     let inv_r2 = 1.0 / (cx * cx + cy * cy);
+    // Vignetting: gain = exposure * (1 - vignetting * r^2), r^2 split into column and row terms.
+    let falloff = effects.exposure * effects.vignetting * inv_r2;
+    let column_falloff: Vec<f32> = (0..w)
+        .map(|col| {
+            let dx = col as f32 + 0.5 - cx;
+            falloff * dx * dx
+        })
+        .collect();
     let noisy = effects.read_noise > 0.0 || effects.shot_noise_gain > 0.0;
+    // Noise standard deviation (read + shot) by signal level, doubled for the sum of three
+    // uniforms below.
+    let mut sigma = [0.0_f32; SIGMA_SIZE];
+    for (i, s) in sigma.iter_mut().enumerate() {
+        let value = (i << SIGMA_SHIFT) as f32 / LUT_PER_UNIT;
+        let sigma =
+            (effects.read_noise * effects.read_noise + effects.shot_noise_gain * value).sqrt();
+        // In display-table units.
+        *s = 2.0 * sigma * LUT_PER_UNIT;
+    }
     let mut bytes = vec![0_u8; w * h * 3];
     bytes
         .par_chunks_mut(w * 3)
+        .zip(linear.par_chunks(w))
         .enumerate()
-        .for_each(|(row, out)| {
+        .for_each(|(row, (out, pixels))| {
             let dy = row as f32 + 0.5 - cy;
-            for col in 0..w {
-                let dx = col as f32 + 0.5 - cx;
-                let gain =
-                    effects.exposure * (1.0 - effects.vignetting * (dx * dx + dy * dy) * inv_r2);
-                let pixel = linear[row * w + col];
+            let row_gain = effects.exposure - falloff * dy * dy;
+            let row_key = effects.noise_key ^ mix64(row as u64);
+            for (col, (pixel, out)) in pixels.iter().zip(out.chunks_exact_mut(3)).enumerate() {
+                let gain = row_gain - column_falloff[col];
                 let hash = if noisy {
-                    mix64(effects.noise_key ^ mix64((row * w + col) as u64))
+                    mix64(row_key ^ col as u64)
                 } else {
                     0
                 };
                 for c in 0..3 {
-                    let mut value = pixel[c] * gain;
+                    let mut level = pixel[c] * gain * LUT_PER_UNIT;
                     if noisy {
                         // Sensor noise in linear units: three 7-bit uniforms per channel summed
                         // (approximately Gaussian, unit variance after scaling).
-                        let bits = hash >> (c * 21);
-                        let g = ((bits & 127) + ((bits >> 7) & 127) + ((bits >> 14) & 127)) as f32
-                            / 127.0
-                            - 1.5;
-                        let sigma = (effects.read_noise * effects.read_noise
-                            + effects.shot_noise_gain * value.max(0.0))
-                        .sqrt();
-                        value += sigma * 2.0 * g;
+                        let bits = (hash >> (c * 21)) as u32;
+                        let g = (bits & 127) + ((bits >> 7) & 127) + ((bits >> 14) & 127);
+                        let g = g as f32 * (1.0 / 127.0) - 1.5;
+                        level += sigma[table_index(level, LUT_SIZE) >> SIGMA_SHIFT] * g;
                     }
-                    let i = ((value * LUT_PER_UNIT) as usize).min(LUT_SIZE - 1);
-                    out[col * 3 + c] = lut[if value > 0.0 { i } else { 0 }];
+                    out[c] = lut[table_index(level, LUT_SIZE)];
                 }
             }
         });
@@ -79,15 +98,27 @@ pub fn finish(
         what: "image buffer size",
     })?;
     if let Some(quality) = effects.jpeg_quality {
-        image = jpeg_round_trip(&image, quality)?;
+        super::jpeg::simulate(&mut image, quality);
     }
     Ok(image)
 }
 
+/// The display table, built on first use.
+static DISPLAY_LUT: OnceLock<Box<[u8; LUT_SIZE]>> = OnceLock::new();
+
+/// `x` rounded to the nearest table index in `[0, size)` (`size` a power of two at most 2^22),
+/// with the float-add trick instead of a float-to-integer conversion.
+#[inline]
+fn table_index(x: f32, size: usize) -> usize {
+    let clamped = x.clamp(0.0, (size - 1) as f32);
+    ((clamped + 8_388_608.0).to_bits() & 0x7F_FFFF) as usize & (size - 1)
+}
+
 /// Linear radiance -> sRGB byte (tone curve `1 - exp(-k x)`, then the sRGB transfer).
-fn display_lut() -> Vec<u8> {
-    (0..LUT_SIZE)
-        .map(|i| {
+fn display_lut() -> Box<[u8; LUT_SIZE]> {
+    let mut table = Box::new([0_u8; LUT_SIZE]);
+    for (i, entry) in table.iter_mut().enumerate() {
+        *entry = {
             let v = 1.0 - (-TONE_K * i as f32 / LUT_PER_UNIT).exp();
             let s = if v <= 0.003_130_8 {
                 12.92 * v
@@ -95,74 +126,68 @@ fn display_lut() -> Vec<u8> {
                 1.055 * v.powf(1.0 / 2.4) - 0.055
             };
             (s * 255.0).round().clamp(0.0, 255.0) as u8
-        })
-        .collect()
+        };
+    }
+    table
 }
 
-/// Encodes as JPEG at `quality` and decodes again.
-pub fn jpeg_round_trip(image: &RgbImage, quality: u8) -> Result<RgbImage, SimError> {
-    let mut buffer = Vec::new();
-    JpegEncoder::new_with_quality(&mut buffer, quality.clamp(1, 100))
-        .encode_image(image)
-        .map_err(|source| SimError::Image {
-            what: "JPEG encode".into(),
-            source,
-        })?;
-    let decoded = image::load_from_memory_with_format(&buffer, image::ImageFormat::Jpeg).map_err(
-        |source| SimError::Image {
-            what: "JPEG decode".into(),
-            source,
-        },
-    )?;
-    Ok(decoded.to_rgb8())
+/// Adds `source` shifted by `shift` columns (clamped at the borders) to `sum`.
+fn add_shifted(sum: &mut [[f32; 3]], source: &[[f32; 3]], shift: i64) {
+    let w = sum.len() as i64;
+    let first = (-shift).clamp(0, w) as usize;
+    let last = (w - shift).clamp(0, w) as usize;
+    let add = |s: &mut [f32; 3], p: &[f32; 3]| {
+        s[0] += p[0];
+        s[1] += p[1];
+        s[2] += p[2];
+    };
+    let (left, right) = (source[0], source[source.len() - 1]);
+    for s in &mut sum[..first] {
+        add(s, &left);
+    }
+    if first < last {
+        let from = (first as i64 + shift) as usize;
+        for (s, p) in sum[first..last].iter_mut().zip(&source[from..]) {
+            add(s, p);
+        }
+    }
+    for s in &mut sum[last.max(first)..] {
+        add(s, &right);
+    }
 }
 
-/// Separable box blur of `radius` pixels, horizontal or vertical.
-fn box_blur(buffer: &mut [[f32; 3]], w: usize, h: usize, radius: usize, horizontal: bool) {
-    if radius == 0 {
+/// Box blur of `radius` pixels in both directions: the mean over the window clamped to the
+/// image (vertical sum of the window's rows, then a running horizontal sum per row).
+fn box_blur(buffer: &mut [[f32; 3]], w: usize, h: usize, radius: usize) {
+    if radius == 0 || w == 0 {
         return;
     }
     let source = buffer.to_vec();
-    let (lines, len) = if horizontal { (h, w) } else { (w, h) };
-    let at = |line: usize, i: usize| {
-        if horizontal {
-            line * w + i
-        } else {
-            i * w + line
+    buffer.par_chunks_mut(w).enumerate().for_each(|(row, out)| {
+        let (lo, hi) = (row.saturating_sub(radius), (row + radius).min(h - 1));
+        let mut column = vec![[0.0_f32; 3]; w];
+        for r in lo..=hi {
+            add_shifted(&mut column, &source[r * w..(r + 1) * w], 0);
         }
-    };
-    let out: Vec<Vec<[f32; 3]>> = (0..lines)
-        .into_par_iter()
-        .map(|line| {
-            let mut result = vec![[0.0_f32; 3]; len];
-            // Running sum over the clamped window [i - radius, i + radius].
-            let mut sum = [0.0_f32; 3];
-            for j in 0..=radius.min(len - 1) {
-                let p = source[at(line, j)];
+        let rows = (hi - lo + 1) as f32;
+        // Running sum over the clamped window [i - radius, i + radius].
+        let mut sum = [0.0_f32; 3];
+        for p in &column[..=radius.min(w - 1)] {
+            sum = [sum[0] + p[0], sum[1] + p[1], sum[2] + p[2]];
+        }
+        for (i, value) in out.iter_mut().enumerate() {
+            let n = ((i + radius).min(w - 1) - i.saturating_sub(radius) + 1) as f32 * rows;
+            *value = sum.map(|s| s / n);
+            if i + radius + 1 < w {
+                let p = column[i + radius + 1];
                 sum = [sum[0] + p[0], sum[1] + p[1], sum[2] + p[2]];
             }
-            for (i, value) in result.iter_mut().enumerate() {
-                let lo = i.saturating_sub(radius);
-                let hi = (i + radius).min(len - 1);
-                let n = (hi - lo + 1) as f32;
-                *value = sum.map(|s| s / n);
-                if i + radius + 1 < len {
-                    let p = source[at(line, i + radius + 1)];
-                    sum = [sum[0] + p[0], sum[1] + p[1], sum[2] + p[2]];
-                }
-                if i >= radius {
-                    let p = source[at(line, i - radius)];
-                    sum = [sum[0] - p[0], sum[1] - p[1], sum[2] - p[2]];
-                }
+            if i >= radius {
+                let p = column[i - radius];
+                sum = [sum[0] - p[0], sum[1] - p[1], sum[2] - p[2]];
             }
-            result
-        })
-        .collect();
-    for (line, values) in out.into_iter().enumerate() {
-        for (i, v) in values.into_iter().enumerate() {
-            buffer[at(line, i)] = v;
         }
-    }
+    });
 }
 
 /// Directional blur: the mean of taps along a segment of `length_px` at `angle_rad`.
@@ -175,17 +200,16 @@ fn motion_blur(buffer: &mut [[f32; 3]], w: usize, h: usize, length_px: f32, angl
             ((s * dx).round() as i64, (s * dy).round() as i64)
         })
         .collect();
+    let scale = 1.0 / offsets.len() as f32;
     let source = buffer.to_vec();
     buffer.par_chunks_mut(w).enumerate().for_each(|(row, out)| {
-        for (col, value) in out.iter_mut().enumerate() {
-            let mut sum = [0.0_f32; 3];
-            for (ox, oy) in &offsets {
-                let x = (col as i64 + ox).clamp(0, w as i64 - 1) as usize;
-                let y = (row as i64 + oy).clamp(0, h as i64 - 1) as usize;
-                let p = source[y * w + x];
-                sum = [sum[0] + p[0], sum[1] + p[1], sum[2] + p[2]];
-            }
-            *value = sum.map(|s| s / offsets.len() as f32);
+        out.fill([0.0; 3]);
+        for (ox, oy) in &offsets {
+            let y = (row as i64 + oy).clamp(0, h as i64 - 1) as usize;
+            add_shifted(out, &source[y * w..(y + 1) * w], *ox);
+        }
+        for value in out.iter_mut() {
+            *value = value.map(|s| s * scale);
         }
     });
 }
@@ -201,13 +225,48 @@ mod tests {
             .map(|i| [i as f32, (i * i % 5) as f32, 1.0])
             .collect();
         let mut blurred = original.clone();
-        box_blur(&mut blurred, w, h, 2, true);
+        box_blur(&mut blurred, w, h, 2);
         for row in 0..h {
             for col in 0..w {
                 let (lo, hi) = (col.saturating_sub(2), (col + 2).min(w - 1));
-                let mean =
-                    (lo..=hi).map(|c| original[row * w + c][1]).sum::<f32>() / (hi - lo + 1) as f32;
+                let (top, bottom) = (row.saturating_sub(2), (row + 2).min(h - 1));
+                let window = (top..=bottom).flat_map(|r| (lo..=hi).map(move |c| r * w + c));
+                let n = ((hi - lo + 1) * (bottom - top + 1)) as f32;
+                let mean = window.map(|i| original[i][1]).sum::<f32>() / n;
                 assert!((blurred[row * w + col][1] - mean).abs() < 1e-4);
+            }
+        }
+    }
+
+    #[test]
+    fn motion_blur_matches_the_direct_mean_of_clamped_taps() {
+        let (w, h) = (9, 4);
+        let original: Vec<[f32; 3]> = (0..w * h).map(|i| [i as f32, 0.0, 1.0]).collect();
+        let mut blurred = original.clone();
+        motion_blur(&mut blurred, w, h, 4.0, 0.6);
+        let taps: Vec<(i64, i64)> = (0..5)
+            .map(|k| {
+                let s = (k as f32 / 4.0 - 0.5) * 4.0;
+                (
+                    (s * 0.6_f32.cos()).round() as i64,
+                    (s * 0.6_f32.sin()).round() as i64,
+                )
+            })
+            .collect();
+        for row in 0..h as i64 {
+            for col in 0..w as i64 {
+                let mean = taps
+                    .iter()
+                    .map(|(ox, oy)| {
+                        let x = (col + ox).clamp(0, w as i64 - 1) as usize;
+                        let y = (row + oy).clamp(0, h as i64 - 1) as usize;
+                        original[y * w + x][0]
+                    })
+                    .sum::<f32>()
+                    / 5.0;
+                let got = blurred[row as usize * w + col as usize];
+                assert!((got[0] - mean).abs() < 1e-3, "{got:?} vs {mean}");
+                assert!((got[2] - 1.0).abs() < 1e-5);
             }
         }
     }

@@ -18,6 +18,13 @@ pub struct NoiseTable {
     values: Vec<f32>,
 }
 
+/// Nearest integer to `x` for `|x| < 2^22` (the float-add trick, no conversion instruction);
+/// larger values wrap, which the callers' lattice masks tolerate.
+#[inline]
+pub fn round_to_i32(x: f32) -> i32 {
+    ((x + 12_582_912.0).to_bits() as i32).wrapping_sub(0x4B40_0000)
+}
+
 /// Floor of a float as an integer (faster than `f32::floor` without SSE4.1).
 #[inline]
 fn floor_i64(x: f32) -> i64 {
@@ -114,23 +121,35 @@ impl MipTexture {
 
     /// Bilinear sample at texel coordinates `(u, v)` (wrapping) from the mip level matching a
     /// footprint of `footprint_texels` texels per pixel.
-    #[inline]
+    #[inline(always)]
     pub fn sample(&self, u: f32, v: f32, footprint_texels: f32) -> f32 {
         // floor(log2(footprint)) from the float's exponent bits.
-        let exponent = ((footprint_texels.max(1.0).to_bits() >> 23) & 0xFF) as usize;
-        let level = exponent.saturating_sub(127).min(self.levels.len() - 1);
-        let side = self.size >> level;
-        let scale = 1.0 / (1 << level) as f32;
+        let exponent = (footprint_texels.max(1.0).to_bits() >> 23) & 0xFF;
+        let level = (exponent - 127).min(self.levels.len() as u32 - 1) as usize;
+        let Some(data) = self.levels.get(level) else {
+            return 0.0;
+        };
+        let scale = f32::from_bits((127 - level as u32) << 23);
+        let shift = self.size.trailing_zeros() as usize - level;
+        let mask = (1 << shift) - 1;
         let (x, y) = (u * scale - 0.5, v * scale - 0.5);
-        let (ix, iy) = (floor_i64(x), floor_i64(y));
+        // The cell's corner: rounding half a texel down gives the floor (or, exactly on a
+        // lattice line, the cell below with weight 1 on its far corner: the same value).
+        let (ix, iy) = (round_to_i32(x - 0.5), round_to_i32(y - 0.5));
         let (tx, ty) = (x - ix as f32, y - iy as f32);
-        let mask = side as i64 - 1;
-        let (x0, y0) = ((ix & mask) as usize, (iy & mask) as usize);
-        let (x1, y1) = ((x0 + 1) & (side - 1), (y0 + 1) & (side - 1));
-        let data = &self.levels[level];
-        let at = |a: usize, b: usize| data[b * side + a];
-        let top = at(x0, y0) + (at(x1, y0) - at(x0, y0)) * tx;
-        let bottom = at(x0, y1) + (at(x1, y1) - at(x0, y1)) * tx;
+        let (x0, y0) = (ix as usize & mask, iy as usize & mask);
+        let (x1, y1) = ((x0 + 1) & mask, ((y0 + 1) & mask) << shift);
+        let y0 = y0 << shift;
+        let (Some(a), Some(b), Some(c), Some(d)) = (
+            data.get(y0 | x0),
+            data.get(y0 | x1),
+            data.get(y1 | x0),
+            data.get(y1 | x1),
+        ) else {
+            return 0.0;
+        };
+        let top = a + (b - a) * tx;
+        let bottom = c + (d - c) * tx;
         top + (bottom - top) * ty
     }
 
