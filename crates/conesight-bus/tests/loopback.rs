@@ -27,6 +27,8 @@ fn free_port() -> u16 {
 
 /// A listening peer and a peer connected to it, in a namespace of their own.
 async fn two_peers(namespace: &str) -> (Session, Session, Topics) {
+    // Logs follow RUST_LOG (e.g. `RUST_LOG=zenoh=debug cargo test -p conesight-bus`).
+    conesight_service::init_tracing();
     let endpoint = format!("tcp/127.0.0.1:{}", free_port());
     let base = ZenohArgs {
         namespace: namespace.to_owned(),
