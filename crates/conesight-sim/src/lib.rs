@@ -10,7 +10,8 @@
 //!   frame's [`scene::Scene`].
 //! - [`render`]: [`render::Renderer`], the entry point for images.
 //! - [`labels`]: per-cone ground truth ([`labels::label_frame`]).
-//! - [`frames`]: random single frames and driven sequences ([`frames::FrameSource`]).
+//! - [`frames`]: random single frames ([`frames::random_frame`]) and driven sequences
+//!   ([`frames::Sequence`]).
 //! - [`writers`]: output formats (documented in `FORMAT.md`).
 //! - [`cli`]: the `conesight sim` command ([`cli::SimArgs`], [`cli::run`]).
 //! - [`rng`]: the deterministic random streams.

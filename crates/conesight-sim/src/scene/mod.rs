@@ -2,13 +2,15 @@
 //!
 //! - [`track`]: random closed circuits; [`layouts`]: acceleration and skidpad.
 //! - [`world`]: a [`World`] (cones with their perturbations and appearance, distractors, light,
-//!   ground, sky) built from a track; constant over a sequence.
+//!   ground, sky) built from a track; constant over a sequence. `surroundings` (private) draws
+//!   the distractors and the environment.
 //! - [`Scene`]: one frame: a world, the camera, its mounting, the vehicle pose and the camera
 //!   effects.
 //!
 //! World frame: the track's ground plane is z = 0, z up.
 
 pub mod layouts;
+mod surroundings;
 pub mod track;
 pub mod world;
 
