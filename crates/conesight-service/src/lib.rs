@@ -10,7 +10,7 @@
 //! - [`health`]: [`Readiness`], the shared state behind `/readyz` (model loaded, session up,
 //!   last input fresh).
 //! - [`http`]: [`router`] (`/livez`, `/readyz`, `/metrics`), [`HttpArgs`] and [`serve`].
-//! - [`healthcheck`]: [`healthcheck()`], an HTTP GET of `/readyz` for containers without curl.
+//! - [`mod@healthcheck`]: [`healthcheck()`], an HTTP GET of `/readyz` for containers without curl.
 //! - [`errors`]: [`ErrorReporter`], counting every error by kind and logging at most one per
 //!   kind per interval.
 //! - [`worker`]: [`Worker`], heavy work on its own thread fed by a slot of 1 (newest wins).

@@ -3,9 +3,9 @@
 use tracing_subscriber::EnvFilter;
 
 /// Filter used when `RUST_LOG` is unset or invalid.
-pub const DEFAULT_LOG_FILTER: &str = "info";
+pub(crate) const DEFAULT_LOG_FILTER: &str = "info";
 
-/// Installs a formatting subscriber filtered by `RUST_LOG` (default [`DEFAULT_LOG_FILTER`]).
+/// Installs a formatting subscriber filtered by `RUST_LOG` (default `info`).
 /// A second call does nothing (tests may call it from many places).
 pub fn init_tracing() {
     let filter =
