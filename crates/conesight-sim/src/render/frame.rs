@@ -5,6 +5,7 @@ use nalgebra::{Isometry3, Matrix3, Point3, Vector3};
 
 use super::{
     Renderer, TEXTURE_OFFSET_RANGE_M, TILE_PX, Tile,
+    backdrop::Backdrop,
     light::{ShadowPolygon, circle_points, shadow_hull},
     raycast::{Placed, Solid},
     texture::Textures,
@@ -23,6 +24,7 @@ pub(super) struct Frame<'a> {
     pub(super) camera_centre: Vector3<f64>,
     pub(super) cone_count: u32,
     pub(super) fx: f64,
+    pub(super) backdrop: Backdrop,
 }
 
 impl Renderer {
@@ -164,6 +166,7 @@ impl Renderer {
             },
             cone_count,
             fx: self.camera.fx_px,
+            backdrop: Backdrop::new(world.environment.texture_key),
         }
     }
 }

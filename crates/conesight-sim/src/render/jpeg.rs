@@ -64,13 +64,14 @@ fn dct_basis() -> Block {
 #[inline]
 fn multiply(a: &Block, b: &Block) -> Block {
     let mut out = [[0.0_f32; 8]; 8];
-    for r in 0..8 {
-        for k in 0..8 {
-            let a_value = a[r][k];
+    for (out_row, a_row) in out.iter_mut().zip(a) {
+        let mut sum = [0.0_f32; 8];
+        for (a_value, b_row) in a_row.iter().zip(b) {
             for j in 0..8 {
-                out[r][j] += a_value * b[k][j];
+                sum[j] += a_value * b_row[j];
             }
         }
+        *out_row = sum;
     }
     out
 }
@@ -104,8 +105,11 @@ impl Codec {
             row.copy_from_slice(&plane[start..start + 8]);
         }
         let mut coefficients = multiply(&multiply(&self.basis, &block), &self.basis_t);
-        for (i, c) in coefficients.iter_mut().flatten().enumerate() {
-            *c = round_to_i32(*c * inverse[i]) as f32 * step[i];
+        for (r, row) in coefficients.iter_mut().enumerate() {
+            for (c, value) in row.iter_mut().enumerate() {
+                let i = r * 8 + c;
+                *value = round_to_i32(*value * inverse[i]) as f32 * step[i];
+            }
         }
         let restored = multiply(&multiply(&self.basis_t, &coefficients), &self.basis);
         for (r, row) in restored.iter().enumerate() {

@@ -1,4 +1,4 @@
-//! Light: sky radiance (gradient, sun glow, clouds, backdrop of trees or buildings), surface
+//! Light: sky radiance (gradient, sun glow, clouds; the backdrop is in [`super::backdrop`]), surface
 //! shading, and cast shadows on the ground as convex polygons.
 //!
 //! Shadows: every solid is sampled at its outline points, which are projected along the sun
@@ -7,7 +7,10 @@
 
 use nalgebra::{Isometry3, Point2, Point3, Vector3};
 
-use super::texture::{PROFILE_SAMPLES, Textures};
+use super::{
+    backdrop::{Backdrop, MAX_ELEVATION},
+    texture::Textures,
+};
 use crate::scene::Environment;
 
 /// Width of the soft shadow edge, metres.
@@ -180,29 +183,36 @@ fn fast_atan2(y: f32, x: f32) -> f32 {
     if y < 0.0 { -r } else { r }
 }
 
-/// Radiance of the sky or backdrop along unit world direction `d`; `offset` shifts the
-/// backdrop profile and clouds per frame.
-pub fn sky(env: &Environment, tex: &Textures, offset: [f32; 2], d: &Vector3<f64>) -> [f32; 3] {
+/// Radiance of the sky or the frame's backdrop along unit world direction `d`; `offset`
+/// shifts the backdrop and clouds per frame.
+pub fn sky(
+    env: &Environment,
+    tex: &Textures,
+    backdrop: &Backdrop,
+    offset: [f32; 2],
+    d: &Vector3<f64>,
+) -> [f32; 3] {
     let dz = d.z as f32;
     let azimuth = fast_atan2(d.y as f32, d.x as f32);
-    // Backdrop: a ragged band above the horizon.
     let turn = azimuth / std::f32::consts::TAU + 0.5 + offset[0];
-    let position = turn.fract() * PROFILE_SAMPLES as f32;
-    let index = (position as usize).min(PROFILE_SAMPLES - 1);
-    let (a, b) = (
-        tex.profile[index],
-        tex.profile[(index + 1) % PROFILE_SAMPLES],
-    );
-    let band = env.backdrop_height_rad * (0.3 + a + (b - a) * position.fract());
-    if dz < band {
-        let detail = 1.0 + 1.2 * tex.grain.sample(azimuth * 900.0, dz * 900.0, 1.0);
-        let light = [0, 1, 2].map(|c| env.ambient_rgb[c] * 0.8 + env.sun_rgb[c] * 0.25);
-        let haze = 0.35;
-        return [0, 1, 2].map(|c| {
-            let surface = env.backdrop_rgb[c] * detail * light[c];
-            surface * (1.0 - haze) + env.sky_horizon_rgb[c] * haze
-        });
+    if dz < MAX_ELEVATION {
+        let behind = match backdrop.solid(env, tex, turn, dz) {
+            Some(colour) => colour,
+            None => open_sky(env, tex, offset, d, dz),
+        };
+        return backdrop.through_fence(turn, dz, behind);
     }
+    open_sky(env, tex, offset, d, dz)
+}
+
+/// Sky gradient, clouds and sun glow along unit world direction `d` (`dz = d.z`).
+fn open_sky(
+    env: &Environment,
+    tex: &Textures,
+    offset: [f32; 2],
+    d: &Vector3<f64>,
+    dz: f32,
+) -> [f32; 3] {
     let t = (dz.max(0.0) * 2.5).min(1.0).sqrt();
     let mut colour = [0, 1, 2]
         .map(|c| env.sky_horizon_rgb[c] + (env.sky_zenith_rgb[c] - env.sky_horizon_rgb[c]) * t);

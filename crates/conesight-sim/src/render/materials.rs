@@ -15,6 +15,11 @@ pub fn cone_colours(class: ConeClass) -> ([f32; 3], [f32; 3]) {
     }
 }
 
+/// Distance between the two wheel marks of a tyre mark, metres.
+const TYRE_TRACK_M: f64 = 1.2;
+/// Blotch level above which the ground darkens into stains.
+const STAIN_LEVEL: f32 = 0.12;
+
 /// Dirt colour (linear).
 const DIRT_RGB: [f32; 3] = [0.12, 0.09, 0.06];
 
@@ -94,9 +99,9 @@ pub fn ground_albedo(
     };
     let grain_scale = tex.grain.size() as f32 / super::texture::GRAIN_TILE_M;
     let blotch_scale = tex.blotch.size() as f32 / super::texture::BLOTCH_TILE_M;
-    let grain = tex
-        .grain
-        .sample(x * grain_scale, y * grain_scale, footprint_m * grain_scale);
+    let grain =
+        tex.grain
+            .sample_trilinear(x * grain_scale, y * grain_scale, footprint_m * grain_scale);
     // A second, rotated and coarser lookup hides the tile period.
     let coarse_scale = grain_scale * 0.23;
     let grain2 = tex.grain.sample(
@@ -109,7 +114,17 @@ pub fn ground_albedo(
         y * blotch_scale,
         footprint_m * blotch_scale,
     );
-    let variation = 1.0 + 0.9 * blotch + contrast * (grain + 0.8 * grain2);
+    let mut variation = 1.0 + 0.9 * blotch + contrast * (grain + 0.8 * grain2);
+    if env.ground != GroundKind::Grass {
+        // Darker wet or oily stains where the blotch field is high.
+        let stain = ((blotch - STAIN_LEVEL) * 8.0).clamp(0.0, 1.0);
+        // Cracks: thin isolines of the coarse grain, only in worn regions and near enough
+        // for a pixel to resolve them.
+        let worn = ((-0.08 - blotch) * 6.0).clamp(0.0, 1.0);
+        let near = (1.0 - footprint_m * 40.0).clamp(0.0, 1.0);
+        let crack = (1.0 - grain2.abs() * 90.0).clamp(0.0, 1.0) * worn * near;
+        variation *= (1.0 - 0.4 * stain) * (1.0 - 0.6 * crack);
+    }
     colour = colour.map(|c| c * variation.max(0.05));
     if env.patch_fraction > 0.0 {
         let patch = tex.blotch.sample(
@@ -161,18 +176,27 @@ pub fn ground_albedo(
     }
     for mark in &env.tyre_marks {
         let (dx, dy) = (x_m - mark.centre_m.x, y_m - mark.centre_m.y);
-        let reach = mark.radius_m + mark.width_m;
+        let reach = mark.radius_m + TYRE_TRACK_M + mark.width_m;
         if dx.abs() > reach || dy.abs() > reach {
             continue;
         }
         let r = (dx * dx + dy * dy).sqrt();
-        if (r - mark.radius_m).abs() < 0.5 * mark.width_m {
+        // Two wheels: the arc and a parallel one a track width further out.
+        let across = (r - mark.radius_m)
+            .abs()
+            .min((r - mark.radius_m - TYRE_TRACK_M).abs());
+        let half = 0.5 * mark.width_m;
+        if across < half {
             let a = dy.atan2(dx);
             let (a0, a1) = mark.angles_rad;
-            let rel = (a - a0).rem_euclid(std::f64::consts::TAU);
-            if rel <= a1 - a0 {
+            let along = (a - a0).rem_euclid(std::f64::consts::TAU) / (a1 - a0).max(1e-6);
+            if along <= 1.0 {
+                // Soft edges, fading in and out along the arc, streaky rubber.
+                let edge = (1.0 - (across / half) * (across / half)) as f32;
+                let fade = (4.0 * along * (1.0 - along)).min(1.0) as f32;
                 let streak = (grain * 2.0 + 0.5).clamp(0.0, 1.0);
-                colour = colour.map(|c| c * (1.0 - mark.strength * (0.5 + 0.5 * streak)));
+                let darkening = mark.strength * edge * fade * (0.5 + 0.5 * streak);
+                colour = colour.map(|c| c * (1.0 - darkening));
             }
         }
     }

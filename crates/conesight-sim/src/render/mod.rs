@@ -7,7 +7,7 @@
 //!   `shading`: the colour of one ray; `passes`: the rendering passes of [`Renderer::render`].
 //! - [`materials`]: albedo of cones (stripes, dirt, scuffs), distractors and ground.
 //! - [`texture`]: multi-octave value noise.
-//! - [`light`]: sky, shading, ground shadows.
+//! - [`light`]: sky, shading, ground shadows; [`backdrop`]: fences, trees, buildings, hills.
 //! - [`post`]: camera effects and tone mapping; [`jpeg`]: JPEG artefacts.
 //!
 //! Entry: [`Renderer::new`] (per camera: builds the per-pixel ray table, undistorting once),
@@ -16,6 +16,7 @@
 //! coordinate `(col, row)` (OpenCV convention); pixels where the object id changes are
 //! re-rendered with 4 sub-samples (anti-aliasing). The object-id buffer keeps the centre sample.
 
+pub mod backdrop;
 mod frame;
 pub mod intersect;
 pub mod jpeg;

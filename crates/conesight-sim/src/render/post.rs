@@ -43,6 +43,7 @@ pub fn finish(
         );
     }
     let lut = DISPLAY_LUT.get_or_init(display_lut);
+    let gauss = GAUSS.get_or_init(gauss_table);
     let (cx, cy) = (0.5 * w as f32, 0.5 * h as f32);
     let inv_r2 = 1.0 / (cx * cx + cy * cy);
     // Vignetting: gain = exposure * (1 - vignetting * r^2), r^2 split into column and row terms.
@@ -83,11 +84,9 @@ pub fn finish(
                 for c in 0..3 {
                     let mut level = pixel[c] * gain * LUT_PER_UNIT;
                     if noisy {
-                        // Sensor noise in linear units: three 7-bit uniforms per channel summed
-                        // (approximately Gaussian, unit variance after scaling).
-                        let bits = (hash >> (c * 21)) as u32;
-                        let g = (bits & 127) + ((bits >> 7) & 127) + ((bits >> 14) & 127);
-                        let g = g as f32 * (1.0 / 127.0) - 1.5;
+                        // Sensor noise: an approximately Gaussian draw per channel from 12
+                        // bits of the pixel's hash.
+                        let g = gauss[(hash >> (c * 12)) as usize & (GAUSS_SIZE - 1)];
                         level += sigma[table_index(level, LUT_SIZE) >> SIGMA_SHIFT] * g;
                     }
                     out[c] = lut[table_index(level, LUT_SIZE)];
@@ -101,6 +100,23 @@ pub fn finish(
         super::jpeg::simulate(&mut image, quality);
     }
     Ok(image)
+}
+
+/// Entries of the noise table.
+const GAUSS_SIZE: usize = 4096;
+/// Noise draws, built on first use.
+static GAUSS: OnceLock<Box<[f32; GAUSS_SIZE]>> = OnceLock::new();
+
+/// Approximately Gaussian draws (the sum of three 7-bit uniforms, centred; standard deviation
+/// 0.5), each table entry from its own hash.
+fn gauss_table() -> Box<[f32; GAUSS_SIZE]> {
+    let mut table = Box::new([0.0_f32; GAUSS_SIZE]);
+    for (i, entry) in table.iter_mut().enumerate() {
+        let bits = mix64(0x6A55 ^ i as u64);
+        let sum = (bits & 127) + ((bits >> 7) & 127) + ((bits >> 14) & 127);
+        *entry = sum as f32 * (1.0 / 127.0) - 1.5;
+    }
+    table
 }
 
 /// The display table, built on first use.

@@ -119,6 +119,7 @@ impl Frame<'_> {
         light::sky(
             env,
             self.tex,
+            &self.backdrop,
             [self.offset[0] * 1e-3, self.offset[1] * 1e-3],
             &view,
         )

@@ -69,7 +69,15 @@ impl MipTexture {
     /// lattice cell of `size / 4` texels, each next octave half the cell and half the
     /// amplitude.
     pub fn fractal(key: u64, size: usize, octaves: u32) -> Self {
-        let mut base = vec![0.0_f32; size * size];
+        Self::fractal_speckled(key, size, octaves, 0.0)
+    }
+
+    /// [`Self::fractal`] plus independent uniform texels of amplitude `speckle` (fine
+    /// aggregate that the mip chain averages away with distance).
+    pub fn fractal_speckled(key: u64, size: usize, octaves: u32, speckle: f32) -> Self {
+        let mut base: Vec<f32> = (0..size * size)
+            .map(|i| speckle * (hash_unit(key ^ 0xB, (i % size) as u64, (i / size) as u64) - 0.5))
+            .collect();
         let mut amplitude = 0.5;
         let mut cells = 4_usize;
         for octave in 0..octaves {
@@ -97,6 +105,11 @@ impl MipTexture {
             amplitude *= 0.5;
             cells *= 2;
         }
+        Self::with_mips(base, size)
+    }
+
+    /// The tile `base` with its box-filtered mip chain.
+    fn with_mips(base: Vec<f32>, size: usize) -> Self {
         let mut levels = vec![base];
         let mut side = size;
         while side > 1 {
@@ -125,7 +138,26 @@ impl MipTexture {
     pub fn sample(&self, u: f32, v: f32, footprint_texels: f32) -> f32 {
         // floor(log2(footprint)) from the float's exponent bits.
         let exponent = (footprint_texels.max(1.0).to_bits() >> 23) & 0xFF;
-        let level = (exponent - 127).min(self.levels.len() as u32 - 1) as usize;
+        self.sample_level(u, v, exponent as usize - 127)
+    }
+
+    /// Like [`Self::sample`], blending the two nearest mip levels (no visible bands where the
+    /// level changes, for textures with strong fine detail).
+    #[inline(always)]
+    pub fn sample_trilinear(&self, u: f32, v: f32, footprint_texels: f32) -> f32 {
+        let bits = footprint_texels.max(1.0).to_bits();
+        let level = ((bits >> 23) & 0xFF) as usize - 127;
+        // The mantissa as the fraction between the levels (log2 linearised per octave).
+        let between = (bits & 0x7F_FFFF) as f32 * (1.0 / 8_388_608.0);
+        let fine = self.sample_level(u, v, level);
+        let coarse = self.sample_level(u, v, level + 1);
+        fine + (coarse - fine) * between
+    }
+
+    /// Bilinear sample at texel coordinates `(u, v)` of level `level` (clamped to the last).
+    #[inline(always)]
+    fn sample_level(&self, u: f32, v: f32, level: usize) -> f32 {
+        let level = level.min(self.levels.len() - 1);
         let Some(data) = self.levels.get(level) else {
             return 0.0;
         };
@@ -164,7 +196,7 @@ impl MipTexture {
 pub struct Textures {
     /// Lattice noise for objects.
     pub noise: NoiseTable,
-    /// Fine ground grain (tile of [`GRAIN_TILE_M`]).
+    /// Fine ground grain with aggregate speckle (tile of [`GRAIN_TILE_M`]).
     pub grain: MipTexture,
     /// Large blotches and patches (tile of [`BLOTCH_TILE_M`]).
     pub blotch: MipTexture,
@@ -176,6 +208,8 @@ pub struct Textures {
 
 /// Ground size of the grain tile, metres.
 pub const GRAIN_TILE_M: f32 = 2.0;
+/// Amplitude of the independent texels (aggregate speckle, 4 mm) in the grain texture.
+const GRAIN_SPECKLE: f32 = 0.9;
 /// Ground size of the blotch tile, metres.
 pub const BLOTCH_TILE_M: f32 = 80.0;
 /// Samples of the backdrop profile.
@@ -194,7 +228,7 @@ impl Textures {
             })
             .collect();
         Self {
-            grain: MipTexture::fractal(key ^ 0x9, 512, 7),
+            grain: MipTexture::fractal_speckled(key ^ 0x9, 512, 7, GRAIN_SPECKLE),
             blotch: MipTexture::fractal(key ^ 0x5, 256, 6),
             clouds: MipTexture::fractal(key ^ 0x7, 256, 6),
             noise,
@@ -229,5 +263,16 @@ mod tests {
         // The coarsest level is the mean of the tile: close to zero, much flatter.
         let coarse = t.sample(10.0, 10.0, 64.0);
         assert!(coarse.abs() < 0.1);
+        // Trilinear: exact levels at powers of two, continuous in between.
+        assert!((t.sample_trilinear(10.0, 10.0, 4.0) - t.sample(10.0, 10.0, 4.0)).abs() < 1e-6);
+        let mut previous = t.sample_trilinear(10.0, 10.0, 1.0);
+        for i in 1..400 {
+            let value = t.sample_trilinear(10.0, 10.0, 1.0 + i as f32 * 0.05);
+            assert!(
+                (value - previous).abs() < 0.02,
+                "{i}: {previous} -> {value}"
+            );
+            previous = value;
+        }
     }
 }

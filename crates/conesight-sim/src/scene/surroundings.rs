@@ -152,8 +152,14 @@ pub(super) fn draw_environment(
         _ => GroundKind::Grass,
     };
     let shade = rng.random_range(0.8..1.25_f32);
+    // Asphalt from fresh and black to sun-bleached grey.
+    let age = if ground == GroundKind::Asphalt {
+        rng.random_range(1.0..2.0_f32)
+    } else {
+        1.0
+    };
     let ground_rgb = match ground {
-        GroundKind::Asphalt => [0.07, 0.07, 0.075].map(|c| c * shade),
+        GroundKind::Asphalt => [0.07, 0.07, 0.075].map(|c| c * shade * age),
         GroundKind::Concrete => [0.28, 0.27, 0.25].map(|c| c * shade),
         GroundKind::Grass => [0.05, 0.10, 0.025].map(|c| c * shade),
     };
