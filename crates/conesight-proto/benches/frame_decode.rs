@@ -29,7 +29,7 @@ fn encoded_frames() -> Vec<(&'static str, Vec<u8>)> {
 }
 
 fn decode(bytes: &[u8]) -> image::RgbImage {
-    pb::ImageFrame::decode(bytes).unwrap().to_rgb().unwrap()
+    pb::ImageFrame::decode(bytes).unwrap().into_rgb().unwrap()
 }
 
 fn frame_decode(c: &mut Criterion) {

@@ -91,31 +91,40 @@ impl pb::ImageFrame {
     }
 
     /// The frame as an RGB8 image (BGR swapped, JPEG decoded with allocation limits); a JPEG
-    /// whose own size differs from `width_px` x `height_px` is rejected.
+    /// whose own size differs from `width_px` x `height_px` is rejected. Copies the pixels; see
+    /// [`Self::into_rgb`] to reuse them.
     pub fn to_rgb(&self) -> Result<RgbImage, ProtoError> {
+        self.clone().into_rgb()
+    }
+
+    /// Like [`Self::to_rgb`], reusing the decoded buffer for raw frames (no pixel copy when
+    /// the frame owns its bytes, as after decoding).
+    pub fn into_rgb(self) -> Result<RgbImage, ProtoError> {
         let encoding = self.validate()?;
+        let (width_px, height_px) = (self.width_px, self.height_px);
         let size_mismatch = |actual_bytes| ProtoError::ImageSize {
-            width_px: self.width_px,
-            height_px: self.height_px,
-            expected_bytes: self.width_px as usize * self.height_px as usize * RAW_BYTES_PER_PIXEL,
+            width_px,
+            height_px,
+            expected_bytes: width_px as usize * height_px as usize * RAW_BYTES_PER_PIXEL,
             actual_bytes,
         };
+        let actual_bytes = self.data.len();
         match encoding {
             ImageEncoding::Rgb8 | ImageEncoding::Unspecified => {
-                RgbImage::from_raw(self.width_px, self.height_px, self.data.to_vec())
-                    .ok_or_else(|| size_mismatch(self.data.len()))
+                RgbImage::from_raw(width_px, height_px, Vec::from(self.data))
+                    .ok_or_else(|| size_mismatch(actual_bytes))
             }
             ImageEncoding::Bgr8 => {
-                let mut pixels = self.data.to_vec();
+                let mut pixels = Vec::from(self.data);
                 for pixel in pixels.chunks_exact_mut(RAW_BYTES_PER_PIXEL) {
                     pixel.swap(0, 2);
                 }
-                RgbImage::from_raw(self.width_px, self.height_px, pixels)
-                    .ok_or_else(|| size_mismatch(self.data.len()))
+                RgbImage::from_raw(width_px, height_px, pixels)
+                    .ok_or_else(|| size_mismatch(actual_bytes))
             }
             ImageEncoding::Jpeg => {
                 let image = decode_jpeg(&self.data)?;
-                if (image.width(), image.height()) != (self.width_px, self.height_px) {
+                if (image.width(), image.height()) != (width_px, height_px) {
                     return Err(size_mismatch(image.as_raw().len()));
                 }
                 Ok(image)
@@ -160,6 +169,7 @@ mod tests {
         let frame = pb::ImageFrame::from_rgb(header(), &image);
         let decoded = pb::ImageFrame::decode(frame.encode_to_vec().as_slice()).unwrap();
         assert_eq!(decoded.to_rgb().unwrap(), image);
+        assert_eq!(decoded.into_rgb().unwrap(), image);
     }
 
     #[test]

@@ -9,6 +9,7 @@
 //!   `pb::Keypoints`, `pb::Cones`, all carrying a `pb::Header`).
 //! - `header`: [`pb::Header::new`], [`now_ns`], [`require_header`], camera id rules.
 //! - `frame`: [`pb::ImageFrame::from_rgb`], [`pb::ImageFrame::from_rgb_jpeg`],
+//!   [`pb::ImageFrame::into_rgb`],
 //!   [`pb::ImageFrame::to_rgb`] (checks dimensions, encoding and size).
 //! - `camera_info`: [`conesight_core::Camera`] and [`conesight_core::Extrinsics`] both ways.
 //! - `detection`: [`ConeDetection`] (class, score, [`conesight_vision::PixelBox`]).
