@@ -3,6 +3,7 @@
 use conesight_core::cone::{ConeClass, ConeModel};
 
 use super::texture::{NoiseTable, Textures};
+use crate::rng::hash_unit;
 use crate::scene::{ConeAppearance, Environment, GroundKind};
 
 /// Linear albedo of a cone's main colour and its stripe colour.
@@ -20,6 +21,11 @@ const TYRE_TRACK_M: f64 = 1.2;
 /// Blotch level above which the ground darkens into stains.
 const STAIN_LEVEL: f32 = 0.12;
 
+/// Light, cyan-leaning blue cone plastic (linear).
+const LIGHT_BLUE_RGB: [f32; 3] = [0.01, 0.3, 0.75];
+/// Red-leaning orange cone plastic (linear).
+const RED_RGB: [f32; 3] = [0.7, 0.04, 0.02];
+
 /// Dirt colour (linear).
 const DIRT_RGB: [f32; 3] = [0.12, 0.09, 0.06];
 
@@ -34,7 +40,15 @@ pub fn cone_albedo(
     azimuth_rad: f64,
     on_plate: bool,
 ) -> [f32; 3] {
-    let (body, stripe) = cone_colours(class);
+    let (mut body, stripe) = cone_colours(class);
+    // Plastics differ by maker and age: blue cones range from deep blue to light cyan-blue,
+    // orange ones towards red (real FSOCO crops show both).
+    let hue = hash_unit(appearance.pattern_key, 17, 29);
+    match class {
+        ConeClass::Blue => body = mix(body, LIGHT_BLUE_RGB, hue * hue * 0.8),
+        ConeClass::Orange | ConeClass::LargeOrange => body = mix(body, RED_RGB, hue * 0.5),
+        ConeClass::Yellow => {}
+    }
     let in_stripe = !on_plate && model.stripes.iter().any(|(lo, hi)| z_m >= *lo && z_m < *hi);
     // Surface coordinates for patterns: around the circumference and up the side, metres.
     let u = (azimuth_rad as f32) * 0.12;
