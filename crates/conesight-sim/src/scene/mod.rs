@@ -43,7 +43,8 @@ pub struct CameraEffects {
     pub motion_blur_angle_rad: f32,
     /// Defocus blur radius, pixels (0 = none).
     pub defocus_px: f32,
-    /// JPEG quality of the encode/decode round trip, `None` for no JPEG artefacts.
+    /// JPEG quality (1-100) whose lossy steps are applied (`render::jpeg`), `None` for no
+    /// JPEG artefacts.
     pub jpeg_quality: Option<u8>,
     /// Key of the per-pixel noise hash.
     pub noise_key: u64,
