@@ -18,23 +18,25 @@ from conesight_train.models import build_model
 CHECKPOINT_FORMAT = "conesight-keypoints-v1"
 
 
-def save_checkpoint(path: str | Path, state: dict[str, Any]) -> None:
+def save_checkpoint(
+    path: str | Path, state: dict[str, Any], checkpoint_format: str = CHECKPOINT_FORMAT
+) -> None:
     """Writes atomically (temp file + rename), so an interrupted save leaves the old file."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(path.suffix + ".tmp")
-    torch.save({"format": CHECKPOINT_FORMAT, **state}, tmp)
+    torch.save({"format": checkpoint_format, **state}, tmp)
     tmp.replace(path)
 
 
-def load_checkpoint(path: str | Path) -> dict[str, Any]:
-    """Reads a checkpoint; raises ValueError naming the file when it is not one of ours."""
+def load_checkpoint(path: str | Path, checkpoint_format: str = CHECKPOINT_FORMAT) -> dict[str, Any]:
+    """Reads a checkpoint; ValueError naming the file when it is not of `checkpoint_format`."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such checkpoint")
     state = torch.load(path, map_location="cpu", weights_only=False)
-    if not isinstance(state, dict) or state.get("format") != CHECKPOINT_FORMAT:
-        raise ValueError(f"{path}: not a conesight keypoint checkpoint ({CHECKPOINT_FORMAT})")
+    if not isinstance(state, dict) or state.get("format") != checkpoint_format:
+        raise ValueError(f"{path}: not a conesight checkpoint of format {checkpoint_format}")
     return state
 
 

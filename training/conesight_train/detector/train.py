@@ -22,6 +22,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from conesight_train import checkpoint
 from conesight_train.detector.config import TrainConfig, open_source
 from conesight_train.detector.dataset import DetectorDataset
 from conesight_train.detector.loss import detector_loss
@@ -36,22 +37,13 @@ AP_SCORE_FLOOR = 0.02
 
 
 def save_checkpoint(path: Path, state: dict[str, Any]) -> None:
-    """Atomic write (temp file + rename)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(".tmp")
-    torch.save({"format": CHECKPOINT_FORMAT, **state}, tmp)
-    tmp.replace(path)
+    """Atomic write of a detector checkpoint (shared writer in `conesight_train.checkpoint`)."""
+    checkpoint.save_checkpoint(path, state, CHECKPOINT_FORMAT)
 
 
 def load_checkpoint(path: str | Path) -> dict[str, Any]:
     """Reads a detector checkpoint; ValueError naming the file when it is not one."""
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such checkpoint")
-    state = torch.load(path, map_location="cpu", weights_only=False)
-    if not isinstance(state, dict) or state.get("format") != CHECKPOINT_FORMAT:
-        raise ValueError(f"{path}: not a conesight detector checkpoint ({CHECKPOINT_FORMAT})")
-    return state
+    return checkpoint.load_checkpoint(path, CHECKPOINT_FORMAT)
 
 
 def model_from_checkpoint(path: str | Path) -> tuple[ConeDetector, TrainConfig, dict[str, Any]]:
