@@ -26,9 +26,11 @@ test-python: setup
 	@status=0; $(PY) -m pytest -q training bench || status=$$?; \
 	  if [ $$status -eq 5 ]; then echo "pytest: no Python tests collected"; status=0; fi; exit $$status
 
-lint:
+lint: setup
 	cargo fmt --all -- --check
 	cargo clippy --workspace --all-targets -- -D warnings
+	$(PY) -m ruff check training bench scripts
+	$(PY) -m ruff format --check training bench scripts
 
 ## Criterion benchmarks (hot paths).
 bench:

@@ -30,7 +30,8 @@ def main() -> None:
     model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
     model.ir_version = 8
     onnx.checker.check_model(model)
-    out = Path(__file__).resolve().parent.parent / "crates/conesight-onnx/tests/data/tiny_affine.onnx"
+    repo = Path(__file__).resolve().parent.parent
+    out = repo / "crates/conesight-onnx/tests/data/tiny_affine.onnx"
     out.parent.mkdir(parents=True, exist_ok=True)
     onnx.save(model, out)
     print(f"wrote {out} ({out.stat().st_size} bytes)")
