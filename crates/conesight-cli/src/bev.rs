@@ -37,7 +37,7 @@ fn to_px(x_m: f64, y_m: f64) -> (f64, f64) {
     )
 }
 
-fn class_colour(class: ConeClass) -> Rgb<u8> {
+pub(crate) fn class_colour(class: ConeClass) -> Rgb<u8> {
     match class {
         ConeClass::Blue => Rgb([30, 80, 230]),
         ConeClass::Yellow => Rgb([235, 200, 0]),
@@ -54,7 +54,7 @@ fn put(image: &mut RgbImage, x: f64, y: f64, colour: Rgb<u8>) {
     }
 }
 
-fn line(image: &mut RgbImage, from: (f64, f64), to: (f64, f64), colour: Rgb<u8>) {
+pub(crate) fn line(image: &mut RgbImage, from: (f64, f64), to: (f64, f64), colour: Rgb<u8>) {
     let steps = (to.0 - from.0)
         .abs()
         .max((to.1 - from.1).abs())
@@ -72,7 +72,7 @@ fn line(image: &mut RgbImage, from: (f64, f64), to: (f64, f64), colour: Rgb<u8>)
     }
 }
 
-fn disc(image: &mut RgbImage, centre: (f64, f64), radius_px: f64, colour: Rgb<u8>) {
+pub(crate) fn disc(image: &mut RgbImage, centre: (f64, f64), radius_px: f64, colour: Rgb<u8>) {
     let r = radius_px.ceil() as i64;
     for dy in -r..=r {
         for dx in -r..=r {

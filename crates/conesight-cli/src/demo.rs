@@ -26,9 +26,12 @@ pub struct DemoArgs {
     /// Radius of the track's left-hand curve, metres (large = straight).
     #[arg(long, default_value_t = 60.0)]
     curve_radius_m: f64,
-    /// Output folder for the bird's-eye-view PNG.
+    /// Output folder for the PNGs.
     #[arg(long, default_value = "out/demo")]
     out: PathBuf,
+    /// Only the geometry part (no rendered frame, no keypoint network).
+    #[arg(long)]
+    skip_frame: bool,
 }
 
 /// Track half width, metres (FS rules: at least 3 m wide).
@@ -162,5 +165,18 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
         "bird's-eye view: {} (filled discs: truth in cone colour; black crosses: estimates; grey ellipses: 3-sigma)",
         png.display()
     );
+    if args.skip_frame {
+        return Ok(());
+    }
+    let mut frame_errors = crate::demo_frame::run(args.seed, &args.out)?;
+    if !frame_errors.is_empty() {
+        frame_errors.sort_by(f64::total_cmp);
+        println!(
+            "{} cones solved from network keypoints; median position error {:.2}% of range, worst {:.2}%",
+            frame_errors.len(),
+            100.0 * frame_errors[frame_errors.len() / 2],
+            100.0 * frame_errors[frame_errors.len() - 1]
+        );
+    }
     Ok(())
 }

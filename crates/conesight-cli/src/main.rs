@@ -6,6 +6,7 @@
 
 mod bev;
 mod demo;
+mod demo_frame;
 
 use clap::{Parser, Subcommand};
 
@@ -19,8 +20,9 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
-    /// Geometry demo: a Formula Student track seen by the paper's camera, exact silhouette
-    /// keypoints plus noise, solved by the cone PnP; prints errors, writes a bird's-eye PNG.
+    /// Demo: (1) a Formula Student track seen by the paper's camera, exact silhouette keypoints
+    /// plus noise, solved by the cone PnP (bird's-eye PNG); (2) a rendered frame through the
+    /// shipped keypoint network and the PnP (annotated PNG).
     Demo(demo::DemoArgs),
     /// Render synthetic Formula Student scenes with exact labels (random frames, or
     /// `sim sequence` for a driven track).
