@@ -16,4 +16,4 @@ pub mod runtime;
 
 pub use error::OnnxError;
 pub use model::{ModelOptions, OnnxModel, TensorF32};
-pub use runtime::{ORT_LIBRARY_FILE, environment, locate_library};
+pub use runtime::{ORT_LIBRARY_FILE, checkout_roots, environment, locate_library};

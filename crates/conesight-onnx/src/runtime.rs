@@ -28,6 +28,20 @@ pub fn locate_library(explicit: Option<&Path>) -> Result<PathBuf, OnnxError> {
     if let Some(path) = std::env::var_os("ORT_DYLIB_PATH").filter(|p| !p.is_empty()) {
         candidates.push(PathBuf::from(path));
     }
+    for root in checkout_roots() {
+        let candidate = root.join(RELATIVE_LIBRARY_DIR).join(ORT_LIBRARY_FILE);
+        if !candidates.contains(&candidate) {
+            candidates.push(candidate);
+        }
+    }
+    first_existing(candidates)
+}
+
+/// Folders that may be the conesight checkout, most specific first: the current directory
+/// and its parents, the running executable's ancestors (so `target/release/conesight` finds
+/// the checkout from anywhere), and this workspace (for tests). Shipped files (`build/...`,
+/// `models/...`) are looked up under each.
+pub fn checkout_roots() -> Vec<PathBuf> {
     let mut roots: Vec<PathBuf> = Vec::new();
     if let Ok(cwd) = std::env::current_dir() {
         roots.extend(cwd.ancestors().map(Path::to_path_buf));
@@ -40,13 +54,7 @@ pub fn locate_library(explicit: Option<&Path>) -> Result<PathBuf, OnnxError> {
             .ancestors()
             .map(Path::to_path_buf),
     );
-    for root in roots {
-        let candidate = root.join(RELATIVE_LIBRARY_DIR).join(ORT_LIBRARY_FILE);
-        if !candidates.contains(&candidate) {
-            candidates.push(candidate);
-        }
-    }
-    first_existing(candidates)
+    roots
 }
 
 /// The first of `candidates` that is a file, or an error listing all of them.
