@@ -87,9 +87,16 @@ def production_loss(
 
 
 def loss_for(
-    model_name: str, output: KeypointOutput, target_px: torch.Tensor, patch_size_px: int
+    model_name: str,
+    output: KeypointOutput,
+    target_px: torch.Tensor,
+    patch_size_px: int,
+    gamma: float = GAMMA,
 ) -> LossTerms:
-    """The training loss of the model called `model_name` ("baseline" or "production")."""
+    """The training loss of the model called `model_name` ("baseline" or "production").
+
+    `gamma` weighs the cross-ratio term (the paper's 1e-4; 0 for the ablation without it).
+    """
     if model_name == "baseline":
-        return paper_loss(output.keypoints_px, target_px, patch_size_px)
-    return production_loss(output, target_px)
+        return paper_loss(output.keypoints_px, target_px, patch_size_px, gamma)
+    return production_loss(output, target_px, gamma)

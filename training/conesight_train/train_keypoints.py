@@ -65,6 +65,8 @@ class TrainConfig:
     augment: bool = True
     checkpoint_every: int = 500
     progress: bool = True
+    # weight of the cross-ratio term (the paper's gamma); 0 trains without it (the ablation)
+    cross_ratio_gamma: float = 1e-4
     model_kwargs: dict[str, Any] = field(default_factory=dict)
 
 
@@ -222,7 +224,9 @@ def train(config: TrainConfig, resume: Path | None = None) -> TrainResult:
         for images, targets in loader:
             for group in optimizer.param_groups:
                 group["lr"] = learning_rate(step, total_steps, config.lr)
-            terms = loss_for(config.model, model(images), targets, images.shape[-1])
+            terms = loss_for(
+                config.model, model(images), targets, images.shape[-1], config.cross_ratio_gamma
+            )
             optimizer.zero_grad(set_to_none=True)
             terms.total.backward()
             optimizer.step()
@@ -306,6 +310,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--no-augment", dest="augment", action="store_const", const=False)
     parser.add_argument("--stop-after", type=int, help="stop after N steps (then --resume)")
     parser.add_argument("--checkpoint-every", type=int)
+    parser.add_argument(
+        "--cross-ratio-gamma", type=float, help="weight of the cross-ratio term (0: ablation)"
+    )
     parser.add_argument("--no-progress", dest="progress", action="store_const", const=False)
     parser.add_argument("--resume", action="store_true", help="continue from OUT/last.pt")
     args = vars(parser.parse_args(argv))

@@ -89,3 +89,26 @@ def test_difficult_truths_count_nowhere():
     # Missing the difficult cone costs nothing either.
     img = ImageResult(dets[:1], truths, np.array([0, 0]), np.array([5.0, 5.0]), hard)
     assert evaluate([img], NAMES, 0.5)["recall_by_range"]["0-10 m"]["truths"] == 1
+
+
+def test_cones_beyond_the_working_range_count_only_in_their_band():
+    truths = [[0, 0, 10, 20], [100, 0, 104, 10], [200, 0, 204, 10]]
+    # The near cone is found, the 45 m cone is missed, the 40 m cone is found.
+    dets = [[0, 0, 10, 20, 0.9, 0], [200, 0, 204, 10, 0.9, 0]]
+    img = image(dets, truths, [0, 0, 0], [5.0, 45.0, 40.0])
+    m = evaluate([img], NAMES, 0.5, max_range_m=30.0)
+    assert m["recall"] == 1.0 and m["precision"] == 1.0 and m["map50"] == 1.0
+    assert m["per_class"]["blue"]["truths"] == 1
+    assert m["recall_by_range"][">= 30 m"] == {"truths": 2, "recall": 0.5}
+    everything = evaluate([img], NAMES, 0.5, max_range_m=None)
+    assert everything["recall"] == pytest.approx(2 / 3)
+    assert everything["per_class"]["blue"]["truths"] == 3
+
+
+def test_a_loose_box_on_an_ignored_cone_is_not_a_false_positive():
+    truths = [[0, 0, 10, 20], [100, 0, 104, 10]]  # a 5 m cone and a 45 m one
+    # The far cone's detection is loose (IoU 0.4 < 0.5) but lies wholly on it: ignored.
+    dets = [[0, 0, 10, 20, 0.9, 0], [100, 0, 104, 4, 0.9, 0], [300, 0, 304, 10, 0.9, 0]]
+    m = evaluate([image(dets, truths, [0, 0], [5.0, 45.0])], NAMES, 0.5)
+    assert m["precision"] == pytest.approx(1 / 2)  # the hit and the background box
+    assert m["recall"] == 1.0

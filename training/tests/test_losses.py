@@ -79,3 +79,18 @@ def test_production_sigma_nll_is_minimised_at_the_mean_error():
     out = KeypointOutput(predicted, torch.full((1, 7), 2.0, requires_grad=True))
     terms = production_loss(out, target)
     assert float(terms.location) == pytest.approx(2.0, rel=1e-5)
+
+
+def test_loss_for_passes_gamma_and_zero_removes_the_cross_ratio_term():
+    from conesight_train.losses import loss_for
+
+    target = keypoints_with_cross_ratio(CR3D)
+    predicted = keypoints_with_cross_ratio(1.6)  # off CR3D: the term is non-zero
+    output = KeypointOutput(keypoints_px=predicted, sigma_px=None)
+    for model in ("baseline", "production"):
+        with_cr = loss_for(model, output, target, 80, gamma=10.0)
+        without = loss_for(model, output, target, 80, gamma=0.0)
+        assert float(with_cr.cross_ratio) > 1e-4
+        assert float(with_cr.total) == pytest.approx(
+            float(without.total) + 10.0 * float(with_cr.cross_ratio), rel=1e-5
+        )

@@ -7,7 +7,9 @@ detections on unlabelled frames (e.g. the real amz sequence) with a count per fr
         --images ../shared/data/real-dev/amz-sequence --png build/amz [--band-top 420]
 
 Labelled: AP@0.5 per class and mAP, precision and recall at the card's score threshold,
-recall by distance band and within 20 m (difficult cones excluded; see `metrics.py`).
+recall by distance band and within 20 m, over cones within the 30 m working range (difficult
+and farther cones excluded, farther ones still get their band; see `metrics.py`), then the same
+over all ranges.
 Drawn PNGs show the band (grey lines), each detection (class colour, score) and, when
 labelled, missed truths (white).
 """
@@ -29,7 +31,7 @@ from tqdm import tqdm
 from conesight_train.detector.augment import to_input
 from conesight_train.detector.band import BandParams
 from conesight_train.detector.data import IMAGE_SUFFIXES, LabelledFrame, RendererFrames, read_rgb
-from conesight_train.detector.metrics import ImageResult, evaluate, match
+from conesight_train.detector.metrics import WORKING_RANGE_M, ImageResult, evaluate, match
 from conesight_train.detector.model import CLASS_NAMES, ExportHead
 from conesight_train.detector.postprocess import Thresholds
 from conesight_train.detector.predict import detections_in_frame
@@ -181,7 +183,14 @@ def main(argv: list[str] | None = None) -> None:
         results = run_frames(source, runner, band, thresholds, args.png, args.png_count)
         report: dict[str, object] = evaluate(results, CLASS_NAMES, thresholds.score_threshold)
         report["frames"] = len(results)
+        print(f"cones within the {WORKING_RANGE_M:g} m working range:")
         print_metrics(report)
+        every = evaluate(results, CLASS_NAMES, thresholds.score_threshold, max_range_m=None)
+        report["all_ranges"] = {k: every[k] for k in ("map50", "precision", "recall", "per_class")}
+        print(
+            f"all ranges: mAP@0.5 {every['map50']:.3f}  precision {every['precision']:.3f}  "
+            f"recall {every['recall']:.3f}"
+        )
     else:
         frames = unlabelled_frames(args.images, args.band_top)[: args.limit]
         results = run_frames(frames, runner, band, thresholds, args.png, args.png_count)

@@ -2,8 +2,9 @@
 their mean, precision and recall at the operating threshold, and recall by distance band.
 
 Matching: per image and class, detections best score first; each takes the unmatched truth of
-its class with the highest IoU >= iou_threshold. Difficult truths (VOC style) are matched too,
-but neither they nor the detections they take count anywhere.
+its class with the highest IoU >= iou_threshold. Difficult truths (VOC style) and truths beyond
+the working range are matched too, but neither they nor the detections they take count anywhere;
+nor do unmatched detections that lie mostly on such a truth (COCO's ignore-region rule).
 """
 
 from __future__ import annotations
@@ -23,6 +24,23 @@ DISTANCE_BANDS_M: tuple[tuple[float, float], ...] = (
 
 # The target's "cones within 20 m".
 NEAR_RANGE_M = 20.0
+# The pipeline's working range: the headline numbers (mAP, precision, recall) count cones up to
+# here; farther cones are treated like difficult ones (found or not, they count nowhere) and are
+# reported only in their own distance band. Beyond 30 m a cone is < 20 px tall, too small for the
+# keypoint network, and the paper's evaluation stops at ~20 m.
+WORKING_RANGE_M = 30.0
+
+
+# Share of an unmatched detection's area on an ignored truth that makes it ignored too.
+IGNORE_COVER = 0.5
+
+
+def cover_fraction(box: np.ndarray, others: np.ndarray) -> np.ndarray:
+    """Intersection with each of `others` [K, 4] over the area of `box` [4]."""
+    w = np.clip(np.minimum(box[2], others[:, 2]) - np.maximum(box[0], others[:, 0]), 0, None)
+    h = np.clip(np.minimum(box[3], others[:, 3]) - np.maximum(box[1], others[:, 1]), 0, None)
+    area = max((box[2] - box[0]) * (box[3] - box[1]), 1e-12)
+    return w * h / area
 
 
 @dataclass(frozen=True)
@@ -79,9 +97,13 @@ def evaluate(
     class_names: tuple[str, ...],
     score_threshold: float,
     iou_threshold: float = 0.5,
+    max_range_m: float | None = WORKING_RANGE_M,
 ) -> dict[str, object]:
     """AP per class and mAP over classes with truths; P/R at `score_threshold`; recall by
-    distance band (truths with a finite range), all at `iou_threshold`."""
+    distance band (truths with a finite range), all at `iou_threshold`.
+
+    Truths beyond `max_range_m` (None: no limit) are left out of AP, P and R like difficult
+    ones, but still get their recall band."""
     per_class: dict[str, dict[str, float]] = {}
     scores_by_class: list[list[np.ndarray]] = [[] for _ in class_names]
     hits_by_class: list[list[np.ndarray]] = [[] for _ in class_names]
@@ -92,10 +114,20 @@ def evaluate(
     near_found = near_total = 0
     for image in images:
         hits, matched_by = match(image, iou_threshold)
-        hard = image.difficult()
-        # Detections that took a difficult truth count nowhere.
+        difficult = image.difficult()
+        hard = difficult.copy()
+        if max_range_m is not None:
+            hard |= image.truth_range_m >= max_range_m
+        # Detections that took a difficult (or out-of-range) truth count nowhere, nor do
+        # unmatched ones lying mostly (>= IGNORE_COVER of their area) on such a truth (COCO's
+        # rule for ignore regions): a loose box on a 40 m cone is not a false positive.
         counted = np.ones(len(image.detections), bool)
         counted[matched_by[(matched_by >= 0) & hard]] = False
+        if np.any(hard):
+            for d in np.nonzero(~hits)[0]:
+                cover = cover_fraction(image.detections[d, :4], image.truth_boxes[hard])
+                if np.max(cover) >= IGNORE_COVER:
+                    counted[d] = False
         for c in range(len(class_names)):
             sel = (image.detections[:, 5] == c) & counted
             scores_by_class[c].append(image.detections[sel, 4])
@@ -107,9 +139,8 @@ def evaluate(
         found = np.zeros(len(image.truth_boxes), bool)
         ok = matched_by >= 0
         found[ok] = image.detections[matched_by[ok], 4] >= score_threshold
-        found |= hard
-        fn += int(np.sum(~found))
-        ranges = np.where(hard, np.nan, image.truth_range_m)
+        fn += int(np.sum(~(found | hard)))
+        ranges = np.where(difficult, np.nan, image.truth_range_m)
         near = ranges < NEAR_RANGE_M
         near_total += int(np.sum(near))
         near_found += int(np.sum(found & near))
@@ -140,6 +171,7 @@ def evaluate(
         "recall": tp / (tp + fn) if tp + fn else float("nan"),
         "score_threshold": score_threshold,
         "iou_threshold": iou_threshold,
+        "max_range_m": max_range_m,
         "per_class": per_class,
         "recall_by_range": bands,
         "recall_within_20m": near_found / near_total if near_total else float("nan"),

@@ -126,6 +126,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--checkpoint", type=Path, required=True)
     parser.add_argument("--out", type=Path, default=Path("models/detector.onnx"))
     parser.add_argument("--metrics", type=Path, help="evaluation JSON to copy into the card")
+    parser.add_argument(
+        "--score-threshold", type=float, help="operating score threshold for the card"
+    )
     args = parser.parse_args(argv)
     from conesight_train.detector.train import model_from_checkpoint
 
@@ -142,7 +145,12 @@ def main(argv: list[str] | None = None) -> None:
     if parity.max_box_diff_px > BOX_TOLERANCE_PX or parity.max_score_diff > SCORE_TOLERANCE:
         raise SystemExit(f"{args.out}: ONNX Runtime disagrees with PyTorch: {parity}")
     metrics = json.loads(args.metrics.read_text()) if args.metrics else None
-    card = model_card(args.out, config.to_dict(), parity, metrics)
+    config_dict = config.to_dict()
+    if args.score_threshold is not None:
+        if not 0.0 < args.score_threshold < 1.0:
+            raise SystemExit(f"--score-threshold {args.score_threshold}: expected 0 < t < 1")
+        config_dict["thresholds"]["score_threshold"] = args.score_threshold  # type: ignore[index]
+    card = model_card(args.out, config_dict, parity, metrics)
     card_path = args.out.with_suffix(".card.json")
     card_path.write_text(json.dumps(card, indent=2) + "\n")
     print(f"wrote {args.out} ({size / 1e6:.2f} MB) and {card_path}; parity {parity}")
