@@ -67,6 +67,11 @@ pub struct ZenohArgs {
     /// turns it off.
     #[arg(long = "zenoh-shm", env = "CONESIGHT_ZENOH_SHM")]
     pub shared_memory: Option<bool>,
+    /// Size of the shared-memory pool Zenoh copies large messages into, MiB (Zenoh's default
+    /// is 16 MiB, two raw 1920x1200 frames; too small a pool makes large messages fall back to
+    /// the socket).
+    #[arg(long = "zenoh-shm-pool-mb", env = "CONESIGHT_ZENOH_SHM_POOL_MB")]
+    pub shm_pool_mb: Option<usize>,
     /// Run namespace: `live` on the car, a fresh name per replay so runs never mix.
     #[arg(long, env = "CONESIGHT_NAMESPACE", default_value = "live")]
     pub namespace: String,
@@ -92,6 +97,7 @@ impl Default for ZenohArgs {
             config: None,
             multicast_scouting: None,
             shared_memory: None,
+            shm_pool_mb: None,
             namespace: "live".to_owned(),
             vehicle: "car".to_owned(),
             frame_encoding: FrameEncoding::Raw,
@@ -135,6 +141,8 @@ mod tests {
             "true",
             "--zenoh-shm",
             "false",
+            "--zenoh-shm-pool-mb",
+            "64",
             "--namespace",
             "replay7",
             "--frame-encoding",
@@ -149,6 +157,7 @@ mod tests {
         assert_eq!(z.listen, ["tcp/127.0.0.1:0"]);
         assert_eq!(z.multicast_scouting, Some(true));
         assert_eq!(z.shared_memory, Some(false));
+        assert_eq!(z.shm_pool_mb, Some(64));
         assert_eq!(z.namespace, "replay7");
         assert_eq!(z.frame_encoding, FrameEncoding::Jpeg);
         assert_eq!(z.jpeg_quality, 75);

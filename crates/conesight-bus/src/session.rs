@@ -47,6 +47,13 @@ pub fn zenoh_config(args: &ZenohArgs) -> Result<Config, BusError> {
             enabled.to_string(),
         )?;
     }
+    if let Some(pool_mb) = args.shm_pool_mb {
+        set(
+            &mut config,
+            "transport/shared_memory/transport_optimization/pool_size",
+            pool_mb.max(1).saturating_mul(1 << 20).to_string(),
+        )?;
+    }
     Ok(config)
 }
 
@@ -103,9 +110,17 @@ mod tests {
             listen: vec!["tcp/127.0.0.1:0".into()],
             multicast_scouting: Some(true),
             shared_memory: Some(false),
+            shm_pool_mb: Some(48),
             ..ZenohArgs::default()
         };
         let config = zenoh_config(&args).unwrap();
+        assert_eq!(
+            get(
+                &config,
+                "transport/shared_memory/transport_optimization/pool_size"
+            ),
+            (48 << 20).to_string()
+        );
         assert_eq!(get(&config, "mode"), "\"client\"");
         assert!(get(&config, "connect/endpoints").contains("tcp/127.0.0.1:7447"));
         assert!(get(&config, "listen/endpoints").contains("tcp/127.0.0.1:0"));

@@ -1,12 +1,21 @@
 //! `conesight`: the command-line tool.
 //!
 //! Subcommands:
-//! - `demo`: the geometry demo (see [`demo`]); `make demo` runs it.
+//! - `run`: the four services in one process over an embedded Zenoh session ([`run`]);
+//!   `make demo` runs it.
+//! - `predict`: the whole pipeline in-process on image files, JSON lines ([`predict`]).
+//! - `keypoints`: the keypoint network on cone crops, JSON lines ([`keypoints_cmd`]).
+//! - `demo`: the geometry demo and one rendered frame through keypoints + PnP ([`demo`]).
 //! - `sim`: the synthetic scene renderer ([`conesight_sim::cli`]).
+//! - `eval`: the paper's experiments on the held-out synthetic set ([`conesight_eval::cli`]);
+//!   `make eval` runs the same through the `conesight-eval` binary and writes the report.
 
 mod bev;
 mod demo;
 mod demo_frame;
+mod keypoints_cmd;
+mod predict;
+mod run;
 
 use clap::{Parser, Subcommand};
 
@@ -20,6 +29,13 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
+    /// The pipeline: camera, detector, keypoints and localiser services in one process over an
+    /// embedded Zenoh session, on a synthetic sequence; live table against ground truth, PNGs.
+    Run(run::RunArgs),
+    /// The pipeline in-process on image files: one JSON object per image on stdout.
+    Predict(predict::PredictArgs),
+    /// The keypoint network on cone crops: one JSON object per crop on stdout.
+    Keypoints(keypoints_cmd::KeypointsArgs),
     /// Demo: (1) a Formula Student track seen by the paper's camera, exact silhouette keypoints
     /// plus noise, solved by the cone PnP (bird's-eye PNG); (2) a rendered frame through the
     /// shipped keypoint network and the PnP (annotated PNG).
@@ -27,12 +43,19 @@ enum Command {
     /// Render synthetic Formula Student scenes with exact labels (random frames, or
     /// `sim sequence` for a driven track).
     Sim(conesight_sim::cli::SimArgs),
+    /// The paper's experiments on the held-out synthetic set: JSONL records for the report
+    /// (`make eval` writes docs/results.md).
+    Eval(conesight_eval::cli::EvalArgs),
 }
 
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
     match cli.command {
+        Command::Run(args) => run::run(args),
+        Command::Predict(args) => predict::run(&args),
+        Command::Keypoints(args) => keypoints_cmd::run(&args),
         Command::Demo(args) => demo::run(&args),
         Command::Sim(args) => conesight_sim::cli::run(args),
+        Command::Eval(args) => conesight_eval::cli::run(&args),
     }
 }

@@ -75,9 +75,39 @@ impl pb::Header {
     }
 }
 
+/// Every message's header sits at field 1; this view skips the rest without copying it.
+#[derive(Clone, PartialEq, prost::Message)]
+struct HeaderOnly {
+    #[prost(message, optional, tag = "1")]
+    header: Option<pb::Header>,
+}
+
+/// The header of an encoded message (any conesight message: it is always field 1), read
+/// without decoding the rest; used to pair frames with their detections before the frame's
+/// pixels are decoded on a worker thread. The header is validated.
+pub fn peek_header(encoded: &[u8]) -> Result<pb::Header, ProtoError> {
+    let view =
+        <HeaderOnly as prost::Message>::decode(encoded).map_err(|e| ProtoError::Missing {
+            field: format!("header (undecodable message: {e})"),
+        })?;
+    require_header(&view.header).cloned()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn peek_header_reads_field_one_only() {
+        use prost::Message;
+        let image = image::RgbImage::new(4, 2);
+        let frame =
+            pb::ImageFrame::from_rgb(pb::Header::new("front", 9, 5, "front_optical"), &image);
+        let header = peek_header(&frame.encode_to_vec()).unwrap();
+        assert_eq!(header.frame_sequence, 9);
+        assert!(peek_header(&[0xff, 0xff, 0xff]).is_err());
+        assert!(peek_header(&[]).is_err());
+    }
 
     #[test]
     fn camera_ids() {

@@ -35,7 +35,7 @@ mod validate;
 pub use cone::LocatedCone;
 pub use detection::ConeDetection;
 pub use error::ProtoError;
-pub use header::{is_valid_camera_id, now_ns, require_header};
+pub use header::{is_valid_camera_id, now_ns, peek_header, require_header};
 pub use keypoints::ConeKeypoints;
 
 /// Types generated from `proto/conesight/v1` (package `conesight.v1`); field docs there.

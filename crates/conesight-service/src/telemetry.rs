@@ -2,10 +2,12 @@
 
 use tracing_subscriber::EnvFilter;
 
-/// Filter used when `RUST_LOG` is unset or invalid.
-pub(crate) const DEFAULT_LOG_FILTER: &str = "info";
+/// Filter used when `RUST_LOG` is unset or invalid: our crates at info, ONNX Runtime and
+/// Zenoh only from warn (their info lines drown the services' own).
+pub(crate) const DEFAULT_LOG_FILTER: &str =
+    "info,ort=warn,zenoh=warn,zenoh_transport=warn,zenoh_link_tcp=warn,zenoh_shm=warn";
 
-/// Installs a formatting subscriber filtered by `RUST_LOG` (default `info`).
+/// Installs a formatting subscriber filtered by `RUST_LOG` (default: our crates at info, ort and zenoh at warn).
 /// A second call does nothing (tests may call it from many places).
 pub fn init_tracing() {
     let filter =

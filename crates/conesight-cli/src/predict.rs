@@ -1,0 +1,159 @@
+//! `conesight predict`: the full pipeline in-process on image files, one JSON object per line;
+//! `--boxes` replaces the detector with given boxes (YOLO txt or KITTI labels).
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use conesight_core::{Camera, Extrinsics};
+use conesight_onnx::ModelOptions;
+use conesight_pipeline::boxes::read_boxes;
+use conesight_pipeline::source::read_image;
+use conesight_pipeline::{FrameResult, InProcessPipeline, PipelineConfig};
+use nalgebra::Matrix3;
+use serde_json::{Value, json};
+
+/// Arguments of `conesight predict`.
+#[derive(Debug, clap::Args)]
+pub struct PredictArgs {
+    /// ROS camera_info YAML of the camera that took the images.
+    #[arg(long)]
+    camera: PathBuf,
+    /// Extrinsics YAML (`vehicle_from_camera`); default: the paper's mounting (1 m high,
+    /// level). Adds `position_vehicle_m` to each cone.
+    #[arg(long)]
+    extrinsics: Option<PathBuf>,
+    /// Given boxes instead of the detector's: a file (used for every image) or a folder of
+    /// `<image stem>.txt` files; YOLO txt (class ids 0 blue, 1 yellow, 2 orange,
+    /// 3 large_orange) or KITTI label lines with FSOCO class names.
+    #[arg(long)]
+    boxes: Option<PathBuf>,
+    /// Detector model (default: the checkout's models/detector.onnx).
+    #[arg(long)]
+    detector: Option<PathBuf>,
+    /// Keypoint model (default: the checkout's models/keypoints.onnx).
+    #[arg(long = "keypoint-model")]
+    keypoint_model: Option<PathBuf>,
+    /// ONNX Runtime library (default: the checkout's build/onnxruntime, or ORT_DYLIB_PATH).
+    #[arg(long = "onnxruntime")]
+    onnxruntime: Option<PathBuf>,
+    /// ONNX Runtime threads per model.
+    #[arg(long = "onnx-threads")]
+    onnx_threads: Option<usize>,
+    /// Constrain cone bases to the road plane of the extrinsics.
+    #[arg(long = "ground-plane")]
+    ground_plane: bool,
+    /// Image files (PNG, JPEG, ...).
+    #[arg(required = true)]
+    images: Vec<PathBuf>,
+}
+
+/// Runs `conesight predict`; fails (after processing every image) when any image failed.
+pub fn run(args: &PredictArgs) -> anyhow::Result<()> {
+    let camera = Camera::from_ros_yaml_file(&args.camera)
+        .with_context(|| format!("camera calibration {}", args.camera.display()))?;
+    let extrinsics = match &args.extrinsics {
+        Some(path) => Extrinsics::from_yaml_file(path)
+            .with_context(|| format!("extrinsics {}", path.display()))?,
+        None => Extrinsics::paper_default(),
+    };
+    let config = PipelineConfig {
+        detector: args.detector.clone(),
+        without_detector: args.boxes.is_some(),
+        keypoint_model: args.keypoint_model.clone(),
+        onnx: ModelOptions {
+            library: args.onnxruntime.clone(),
+            intra_threads: args.onnx_threads,
+        },
+        on_ground_plane: args.ground_plane,
+    };
+    let mut pipeline = InProcessPipeline::load(&config, &camera, &extrinsics)?;
+    let stdout = std::io::stdout();
+    let mut out = stdout.lock();
+    let mut failed = 0_usize;
+    for path in &args.images {
+        let line = match predict_one(&mut pipeline, path, args.boxes.as_deref()) {
+            Ok(result) => json!({
+                "image": path.display().to_string(),
+                "cones": cones_json(&result, args.extrinsics.is_some()),
+            }),
+            Err(error) => {
+                failed += 1;
+                eprintln!("{}: {error:#}", path.display());
+                json!({"image": path.display().to_string(), "error": format!("{error:#}")})
+            }
+        };
+        writeln!(out, "{line}")?;
+    }
+    anyhow::ensure!(
+        failed == 0,
+        "{failed} of {} images failed (see the messages above)",
+        args.images.len()
+    );
+    Ok(())
+}
+
+fn predict_one(
+    pipeline: &mut InProcessPipeline,
+    path: &Path,
+    boxes: Option<&Path>,
+) -> anyhow::Result<FrameResult> {
+    let image = read_image(path)?;
+    let given = match boxes {
+        None => None,
+        Some(boxes) => {
+            let file = if boxes.is_dir() {
+                boxes.join(path.with_extension("txt").file_name().unwrap_or_default())
+            } else {
+                boxes.to_path_buf()
+            };
+            Some(read_boxes(&file, image.width(), image.height())?)
+        }
+    };
+    Ok(pipeline.process(&image, given.as_deref())?)
+}
+
+fn matrix_json(m: &Matrix3<f64>) -> Value {
+    json!([
+        [m[(0, 0)], m[(0, 1)], m[(0, 2)]],
+        [m[(1, 0)], m[(1, 1)], m[(1, 2)]],
+        [m[(2, 0)], m[(2, 1)], m[(2, 2)]]
+    ])
+}
+
+/// The JSON cones of a frame: every keypoint set, with its position when the PnP placed it.
+pub fn cones_json(result: &FrameResult, with_vehicle: bool) -> Vec<Value> {
+    result
+        .keypoints
+        .iter()
+        .enumerate()
+        .map(|(index, cone)| {
+            let b = &cone.detection.box_px;
+            let mut value = json!({
+                "class": cone.detection.class.as_str(),
+                "score": cone.detection.score,
+                "bbox_px": [b.x_min_px, b.y_min_px, b.x_max_px, b.y_max_px],
+                "keypoints_px": cone.observation.keypoints_px.iter().map(|p| [p.x, p.y]).collect::<Vec<_>>(),
+                "confidence": cone.observation.weights,
+            });
+            let located = result.cones.iter().find(|(i, _)| *i == index).map(|(_, c)| c);
+            if let Some(located) = located {
+                let p = located.estimate.position_in_camera;
+                value["position_camera_m"] = json!([p.x, p.y, p.z]);
+                value["range_m"] = json!(located.estimate.range_m());
+                value["covariance_m2"] = matrix_json(&located.estimate.covariance_m2);
+                if with_vehicle {
+                    let v = located.position_in_vehicle;
+                    value["position_vehicle_m"] = json!([v.x, v.y, v.z]);
+                }
+            } else {
+                value["position_camera_m"] = Value::Null;
+                value["range_m"] = Value::Null;
+                value["covariance_m2"] = Value::Null;
+                let reason = result.failed.iter().find(|(i, _)| *i == index).map(|(_, e)| e.clone());
+                value["pnp_error"] = json!(reason);
+            }
+            value
+        })
+        .collect()
+}

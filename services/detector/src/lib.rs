@@ -1,0 +1,173 @@
+//! # The detector service
+//!
+//! Frames in (`.../<camera>/frame`, newest wins), detections out (`.../<camera>/detections`).
+//! Decoding and inference run on the worker thread `detector`, fed by a slot of 1: while it
+//! works on a frame, a newer frame replaces any waiting one (counted as dropped). The band of
+//! the detector follows the horizon of the camera info (`.../<camera>/camera_info`).
+//!
+//! Entry point: [`run`].
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Instant;
+
+use conesight_bus::zenoh::Wait;
+use conesight_bus::zenoh::sample::Sample;
+use conesight_bus::{Stream, declare_publisher, declare_subscriber, encode};
+use conesight_core::Extrinsics;
+use conesight_onnx::ModelOptions;
+use conesight_pipeline::node::{CalibrationCell, CommonArgs, follow_camera_info};
+use conesight_pipeline::{DetectorStage, Node, Shutdown, locate_detector};
+use conesight_proto::{pb, require_header};
+use conesight_service::Worker;
+
+/// Arguments of the detector service.
+#[derive(Debug, Clone, clap::Args)]
+pub struct DetectorArgs {
+    /// Bus, HTTP and camera id.
+    #[command(flatten)]
+    pub common: CommonArgs,
+    /// Detector model (its card `NAME.card.json` beside it); default: the checkout's
+    /// `models/detector.onnx`.
+    #[arg(long = "model", env = "CONESIGHT_DETECTOR_MODEL")]
+    pub model: Option<PathBuf>,
+    /// ONNX Runtime intra-op threads (default: ONNX Runtime's choice, every core).
+    #[arg(long = "onnx-threads", env = "CONESIGHT_ONNX_THREADS")]
+    pub onnx_threads: Option<usize>,
+}
+
+impl DetectorArgs {
+    /// Defaults for `common`.
+    pub fn new(common: CommonArgs) -> Self {
+        Self {
+            common,
+            model: None,
+            onnx_threads: None,
+        }
+    }
+}
+
+/// Runs the detector until `shutdown`.
+pub async fn run(args: &DetectorArgs, node: Node, shutdown: Shutdown) -> anyhow::Result<()> {
+    let camera = args.common.camera.as_str();
+    let path = locate_detector(args.model.as_deref());
+    let onnx = ModelOptions {
+        intra_threads: args.onnx_threads,
+        ..ModelOptions::default()
+    };
+    let mut stage =
+        tokio::task::spawn_blocking(move || DetectorStage::load(&path, &onnx)).await??;
+    node.readiness.set_model_loaded(true);
+    let calibration = Arc::new(CalibrationCell::default());
+    follow_camera_info(&node, camera, calibration.clone(), &shutdown).await?;
+    let frames = declare_subscriber(
+        &node.session,
+        node.topics.key(camera, Stream::Frame)?,
+        Stream::Frame,
+    )
+    .await?;
+    let publisher =
+        declare_publisher(&node.session, &node.topics, camera, Stream::Detections).await?;
+    let limit = args.common.max_message_bytes();
+    let worker_node = node.clone();
+    let mut seen_calibration = 0_u64;
+    let worker = Worker::spawn("detector", node.metrics.clone(), move |sample: Sample| {
+        let node = &worker_node;
+        let started = Instant::now();
+        let Some(frame) = node.decode::<pb::ImageFrame>(&sample, limit) else {
+            return;
+        };
+        let header = match require_header(&frame.header) {
+            Ok(header) => header.clone(),
+            Err(error) => {
+                node.metrics.frame_dropped();
+                node.errors.report(error.kind(), &error);
+                return;
+            }
+        };
+        let image = match frame.into_rgb() {
+            Ok(image) => image,
+            Err(error) => {
+                node.metrics.frame_dropped();
+                node.errors.report(error.kind(), &error);
+                return;
+            }
+        };
+        node.metrics.observe_stage("decode", started.elapsed());
+        if let Some((camera, extrinsics)) = calibration.newer(&mut seen_calibration) {
+            stage.set_calibration(
+                &camera,
+                &extrinsics.unwrap_or_else(Extrinsics::paper_default),
+            );
+        }
+        let inference = Instant::now();
+        let detections = match stage.detect(&image) {
+            Ok(detections) => detections,
+            Err(error) => {
+                node.metrics.frame_dropped();
+                node.errors.report(error.kind(), &error);
+                return;
+            }
+        };
+        node.metrics.observe_stage("inference", inference.elapsed());
+        let mut header = header;
+        header.stamp_publish();
+        let message = pb::Detections::new(header, &detections);
+        match publisher.put(encode(&message)).wait() {
+            Ok(()) => node.metrics.frame_processed(),
+            Err(error) => {
+                node.errors.report("publish", &error);
+            }
+        }
+        node.metrics.observe_stage("total", started.elapsed());
+        tracing::trace!(detections = detections.len(), "detections published");
+    })?;
+    loop {
+        tokio::select! {
+            () = shutdown.wait() => break,
+            sample = frames.recv_async() => {
+                let Ok(sample) = sample else { break };
+                node.metrics.frame_received();
+                node.readiness.mark_input();
+                worker.submit(sample);
+            }
+        }
+    }
+    if !tokio::task::block_in_place(|| worker.shutdown()) {
+        anyhow::bail!("the detector worker panicked");
+    }
+    Ok(())
+}
+
+/// The `conesight-detector` command line.
+#[derive(Debug, clap::Parser)]
+#[command(
+    name = "conesight-detector",
+    version,
+    about = "Detects cones in frames: frames in, detections out."
+)]
+struct Cli {
+    #[command(subcommand)]
+    healthcheck: Option<conesight_pipeline::node::ServiceCommand>,
+    #[command(flatten)]
+    args: DetectorArgs,
+}
+
+/// The whole `main` of `conesight-detector` on the command line `argv` (program name first):
+/// parses it, runs the service (or `healthcheck`) on a tokio runtime, returns the exit code.
+pub fn main_from(argv: Vec<std::ffi::OsString>) -> std::process::ExitCode {
+    use conesight_pipeline::node::{MAX_INPUT_AGE, parse_service_cli, run_service_binary};
+    let cli: Cli = match parse_service_cli(argv) {
+        Ok(cli) => cli,
+        Err(code) => return code,
+    };
+    let args = cli.args;
+    let common = args.common.clone();
+    run_service_binary(
+        "detector",
+        cli.healthcheck,
+        common,
+        Some(MAX_INPUT_AGE),
+        |node, shutdown| async move { run(&args, node, shutdown).await },
+    )
+}

@@ -1,0 +1,261 @@
+//! # The keypoints service
+//!
+//! Frames (`.../<camera>/frame`) + detections (`.../<camera>/detections`) in, keypoints
+//! (`.../<camera>/keypoints`) out: every box of a frame is cropped to an 80x80 patch and all
+//! patches go through the keypoint network in one batched call.
+//!
+//! How frames reach it: the service subscribes to the camera's full frames itself, whether or
+//! not it shares a host with the camera. On one host raw frames travel through Zenoh's shared
+//! memory (no copy over the socket); across hosts the camera publishes JPEG
+//! (`--frame-encoding jpeg`, about 0.3-0.6 MB per 1920x1200 frame at quality 90). Sending
+//! patches from the detector's host instead would tie the keypoint stage to the detector's
+//! process and crop rule; a frame is needed anyway for any later stage that looks at pixels.
+//!
+//! Frames and detections are joined on (sequence, acquisition time) in [`pairing::Pairing`]
+//! (bounded caches); the frame's header is read without decoding its pixels
+//! ([`conesight_proto::peek_header`]) and the pixels are decoded on the worker thread.
+//!
+//! Entry point: [`run`].
+
+pub mod pairing;
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use conesight_bus::zenoh::Wait;
+use conesight_bus::zenoh::sample::Sample;
+use conesight_bus::{Stream, declare_publisher, declare_subscriber, encode};
+use conesight_onnx::ModelOptions;
+use conesight_pipeline::keypoint_stage::DEFAULT_MAX_CONES_PER_FRAME;
+use conesight_pipeline::node::CommonArgs;
+use conesight_pipeline::{KeypointStage, Node, Shutdown};
+use conesight_proto::{pb, peek_header, require_header};
+use conesight_service::Worker;
+
+use crate::pairing::{Paired, Pairing};
+
+/// Default number of frames (and of detection messages) waiting to be paired.
+pub const DEFAULT_PAIR_CACHE: usize = 4;
+/// Largest accepted detections message, bytes.
+pub const DETECTIONS_LIMIT_BYTES: usize = 1 << 20;
+
+/// Arguments of the keypoints service.
+#[derive(Debug, Clone, clap::Args)]
+pub struct KeypointsArgs {
+    /// Bus, HTTP and camera id.
+    #[command(flatten)]
+    pub common: CommonArgs,
+    /// Keypoint model; default: the checkout's `models/keypoints.onnx`.
+    #[arg(long = "model", env = "CONESIGHT_KEYPOINT_MODEL")]
+    pub model: Option<PathBuf>,
+    /// ONNX Runtime intra-op threads (default: ONNX Runtime's choice, every core).
+    #[arg(long = "onnx-threads", env = "CONESIGHT_ONNX_THREADS")]
+    pub onnx_threads: Option<usize>,
+    /// Most cones per frame sent through the network (highest scores kept).
+    #[arg(long = "max-cones", default_value_t = DEFAULT_MAX_CONES_PER_FRAME)]
+    pub max_cones: usize,
+    /// Frames (and detection messages) kept waiting for their partner.
+    #[arg(long = "pair-cache", default_value_t = DEFAULT_PAIR_CACHE)]
+    pub pair_cache: usize,
+}
+
+impl KeypointsArgs {
+    /// Defaults for `common`.
+    pub fn new(common: CommonArgs) -> Self {
+        Self {
+            common,
+            model: None,
+            onnx_threads: None,
+            max_cones: DEFAULT_MAX_CONES_PER_FRAME,
+            pair_cache: DEFAULT_PAIR_CACHE,
+        }
+    }
+}
+
+/// Runs the keypoint service until `shutdown`.
+pub async fn run(args: &KeypointsArgs, node: Node, shutdown: Shutdown) -> anyhow::Result<()> {
+    let camera = args.common.camera.as_str();
+    let path = conesight_pipeline::models::locate_keypoint_model(args.model.as_deref());
+    let onnx = ModelOptions {
+        intra_threads: args.onnx_threads,
+        ..ModelOptions::default()
+    };
+    let max_cones = args.max_cones;
+    let mut stage = tokio::task::spawn_blocking(move || {
+        KeypointStage::load(&path, &onnx).map(|stage| stage.with_max_cones(max_cones))
+    })
+    .await??;
+    node.readiness.set_model_loaded(true);
+    let frames = declare_subscriber(
+        &node.session,
+        node.topics.key(camera, Stream::Frame)?,
+        Stream::Frame,
+    )
+    .await?;
+    let detections = declare_subscriber(
+        &node.session,
+        node.topics.key(camera, Stream::Detections)?,
+        Stream::Detections,
+    )
+    .await?;
+    let publisher =
+        declare_publisher(&node.session, &node.topics, camera, Stream::Keypoints).await?;
+    let limit = args.common.max_message_bytes();
+    let worker_node = node.clone();
+    let worker = Worker::spawn(
+        "keypoints",
+        node.metrics.clone(),
+        move |(sample, detections): (Sample, pb::Detections)| {
+            let node = &worker_node;
+            let started = Instant::now();
+            let Some(frame) = node.decode::<pb::ImageFrame>(&sample, limit) else {
+                return;
+            };
+            let image = match frame.into_rgb() {
+                Ok(image) => image,
+                Err(error) => {
+                    node.metrics.frame_dropped();
+                    node.errors.report(error.kind(), &error);
+                    return;
+                }
+            };
+            node.metrics.observe_stage("decode", started.elapsed());
+            let (header, boxes) = match require_header(&detections.header)
+                .cloned()
+                .and_then(|header| Ok((header, detections.to_core()?)))
+            {
+                Ok(parts) => parts,
+                Err(error) => {
+                    node.metrics.frame_dropped();
+                    node.errors.report(error.kind(), &error);
+                    return;
+                }
+            };
+            let inference = Instant::now();
+            let output = match stage.predict(&image, &boxes) {
+                Ok(output) => output,
+                Err(error) => {
+                    node.metrics.frame_dropped();
+                    node.errors.report(error.kind(), &error);
+                    return;
+                }
+            };
+            node.metrics.observe_stage("inference", inference.elapsed());
+            for (index, error) in &output.rejected {
+                node.errors
+                    .report("invalid_box", &format!("detection {index}: {error}"));
+            }
+            if output.over_cap > 0 {
+                node.errors.report(
+                    "too_many_detections",
+                    &format!(
+                        "{} detections over the cap of {max_cones} per frame were skipped (lowest scores)",
+                        output.over_cap
+                    ),
+                );
+            }
+            let mut header = header;
+            header.stamp_publish();
+            let message = pb::Keypoints::new(header, &output.cones);
+            match publisher.put(encode(&message)).wait() {
+                Ok(()) => node.metrics.frame_processed(),
+                Err(error) => {
+                    node.errors.report("publish", &error);
+                }
+            }
+            node.metrics.observe_stage("total", started.elapsed());
+        },
+    )?;
+    let mut pairing: Pairing<Sample, pb::Detections> = Pairing::new(args.pair_cache);
+    loop {
+        tokio::select! {
+            () = shutdown.wait() => break,
+            sample = frames.recv_async() => {
+                let Ok(sample) = sample else { break };
+                if sample.payload().len() > limit {
+                    // Counted and logged by decode.
+                    let _ = node.decode::<pb::ImageFrame>(&sample, limit);
+                    continue;
+                }
+                let header = match peek_header(&sample.payload().to_bytes()) {
+                    Ok(header) => header,
+                    Err(error) => {
+                        node.metrics.frame_dropped();
+                        node.errors.report("malformed_protobuf", &error);
+                        continue;
+                    }
+                };
+                let key = (header.frame_sequence, header.acquisition_time_ns);
+                if let Some(pair) = pairing.add_frame(key, sample) {
+                    node.metrics.frame_received();
+                    node.readiness.mark_input();
+                    worker.submit(pair);
+                }
+            }
+            sample = detections.recv_async() => {
+                let Ok(sample) = sample else { break };
+                let Some(message) = node.decode::<pb::Detections>(&sample, DETECTIONS_LIMIT_BYTES) else {
+                    continue;
+                };
+                let key = match require_header(&message.header) {
+                    Ok(header) => (header.frame_sequence, header.acquisition_time_ns),
+                    Err(error) => {
+                        node.metrics.frame_dropped();
+                        node.errors.report(error.kind(), &error);
+                        continue;
+                    }
+                };
+                match pairing.add_detections(key, message) {
+                    Paired::Ready(frame, message) => {
+                        node.metrics.frame_received();
+                        node.readiness.mark_input();
+                        worker.submit((frame, message));
+                    }
+                    Paired::Waiting { evicted } => {
+                        for _ in 0..evicted {
+                            node.metrics.frame_dropped();
+                            node.errors.report("frame_not_found", &"detections whose frame never arrived were dropped (frame lost or camera too far behind)");
+                        }
+                    }
+                }
+            }
+        }
+    }
+    if !tokio::task::block_in_place(|| worker.shutdown()) {
+        anyhow::bail!("the keypoints worker panicked");
+    }
+    Ok(())
+}
+
+/// The `conesight-keypoints` command line.
+#[derive(Debug, clap::Parser)]
+#[command(
+    name = "conesight-keypoints",
+    version,
+    about = "Places the 7 keypoints on every detected cone: frames + detections in, keypoints out."
+)]
+struct Cli {
+    #[command(subcommand)]
+    healthcheck: Option<conesight_pipeline::node::ServiceCommand>,
+    #[command(flatten)]
+    args: KeypointsArgs,
+}
+
+/// The whole `main` of `conesight-keypoints` on the command line `argv` (program name first):
+/// parses it, runs the service (or `healthcheck`) on a tokio runtime, returns the exit code.
+pub fn main_from(argv: Vec<std::ffi::OsString>) -> std::process::ExitCode {
+    use conesight_pipeline::node::{MAX_INPUT_AGE, parse_service_cli, run_service_binary};
+    let cli: Cli = match parse_service_cli(argv) {
+        Ok(cli) => cli,
+        Err(code) => return code,
+    };
+    let args = cli.args;
+    let common = args.common.clone();
+    run_service_binary(
+        "keypoints",
+        cli.healthcheck,
+        common,
+        Some(MAX_INPUT_AGE),
+        |node, shutdown| async move { run(&args, node, shutdown).await },
+    )
+}

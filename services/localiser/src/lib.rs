@@ -1,0 +1,191 @@
+//! # The localiser service
+//!
+//! Keypoints (`.../<camera>/keypoints`) + camera info (`.../<camera>/camera_info`) in, cones
+//! (`.../<camera>/cones`) out: the cone PnP places every cone with a covariance in the camera
+//! frame, the extrinsics carry it into the vehicle frame, and each `Cones` message carries its
+//! frame's end-to-end latency (publish time minus acquisition time). PnP runs on the worker
+//! thread `localiser`.
+//!
+//! The extrinsics come from `--extrinsics` when given, else from the camera info; without
+//! either the paper's mounting is used and the error kind `no_extrinsics` is counted.
+//!
+//! Entry point: [`run`].
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use conesight_bus::zenoh::Wait;
+use conesight_bus::zenoh::sample::Sample;
+use conesight_bus::{Stream, declare_publisher, declare_subscriber, encode};
+use conesight_core::Extrinsics;
+use conesight_pipeline::node::{CalibrationCell, CommonArgs, follow_camera_info};
+use conesight_pipeline::{LocaliserStage, Node, Shutdown};
+use conesight_proto::{pb, require_header};
+use conesight_service::Worker;
+
+/// Largest accepted keypoints message, bytes.
+pub const KEYPOINTS_LIMIT_BYTES: usize = 4 << 20;
+
+/// Arguments of the localiser service.
+#[derive(Debug, Clone, clap::Args)]
+pub struct LocaliserArgs {
+    /// Bus, HTTP and camera id.
+    #[command(flatten)]
+    pub common: CommonArgs,
+    /// Extrinsics YAML overriding the camera info's mounting.
+    #[arg(long, env = "CONESIGHT_EXTRINSICS")]
+    pub extrinsics: Option<PathBuf>,
+    /// Constrain cone bases to the road plane of the extrinsics.
+    #[arg(long = "ground-plane", env = "CONESIGHT_GROUND_PLANE")]
+    pub ground_plane: bool,
+}
+
+impl LocaliserArgs {
+    /// Defaults for `common`.
+    pub fn new(common: CommonArgs) -> Self {
+        Self {
+            common,
+            extrinsics: None,
+            ground_plane: false,
+        }
+    }
+}
+
+/// Runs the localiser until `shutdown`.
+pub async fn run(args: &LocaliserArgs, node: Node, shutdown: Shutdown) -> anyhow::Result<()> {
+    let camera = args.common.camera.as_str();
+    let fixed_extrinsics = match &args.extrinsics {
+        Some(path) => Some(Extrinsics::from_yaml_file(path)?),
+        None => None,
+    };
+    node.readiness.set_model_loaded(true);
+    let calibration = Arc::new(CalibrationCell::default());
+    follow_camera_info(&node, camera, calibration.clone(), &shutdown).await?;
+    let keypoints = declare_subscriber(
+        &node.session,
+        node.topics.key(camera, Stream::Keypoints)?,
+        Stream::Keypoints,
+    )
+    .await?;
+    let publisher = declare_publisher(&node.session, &node.topics, camera, Stream::Cones).await?;
+    let limit = args.common.max_message_bytes().min(KEYPOINTS_LIMIT_BYTES);
+    let ground_plane = args.ground_plane;
+    let worker_node = node.clone();
+    let mut seen_calibration = 0_u64;
+    let mut stage: Option<LocaliserStage> = None;
+    let mut missing_extrinsics = false;
+    let worker = Worker::spawn("localiser", node.metrics.clone(), move |sample: Sample| {
+        let node = &worker_node;
+        let started = Instant::now();
+        let Some(message) = node.decode::<pb::Keypoints>(&sample, limit) else {
+            return;
+        };
+        let (header, cones) = match require_header(&message.header)
+            .cloned()
+            .and_then(|header| Ok((header, message.to_core()?)))
+        {
+            Ok(parts) => parts,
+            Err(error) => {
+                node.metrics.frame_dropped();
+                node.errors.report(error.kind(), &error);
+                return;
+            }
+        };
+        if let Some((camera, extrinsics)) = calibration.newer(&mut seen_calibration) {
+            let extrinsics = fixed_extrinsics.or(extrinsics);
+            missing_extrinsics = extrinsics.is_none();
+            match LocaliserStage::new(
+                &camera,
+                &extrinsics.unwrap_or_else(Extrinsics::paper_default),
+                ground_plane,
+            ) {
+                Ok(new_stage) => stage = Some(new_stage),
+                Err(error) => {
+                    node.errors.report(error.kind(), &error);
+                    stage = None;
+                }
+            }
+        }
+        let Some(stage) = stage.as_ref() else {
+            node.metrics.frame_dropped();
+            node.errors.report(
+                "no_camera_info",
+                &"keypoints arrived before a valid camera_info; is the camera service up?",
+            );
+            return;
+        };
+        if missing_extrinsics {
+            node.errors.report(
+                "no_extrinsics",
+                &"neither --extrinsics nor the camera info gives the mounting; using the paper's (1 m high, level)",
+            );
+        }
+        let pnp = Instant::now();
+        let output = stage.localise(&cones);
+        node.metrics.observe_stage("pnp", pnp.elapsed());
+        for (index, error) in &output.failed {
+            node.errors
+                .report("pnp_failed", &format!("cone {index}: {error}"));
+        }
+        let located: Vec<_> = output.cones.into_iter().map(|(_, cone)| cone).collect();
+        let message = pb::Cones::new_stamped(header, &located);
+        node.metrics
+            .observe_stage("end_to_end", Duration::from_nanos(message.latency_ns));
+        match publisher.put(encode(&message)).wait() {
+            Ok(()) => node.metrics.frame_processed(),
+            Err(error) => {
+                node.errors.report("publish", &error);
+            }
+        }
+        node.metrics.observe_stage("total", started.elapsed());
+    })?;
+    loop {
+        tokio::select! {
+            () = shutdown.wait() => break,
+            sample = keypoints.recv_async() => {
+                let Ok(sample) = sample else { break };
+                node.metrics.frame_received();
+                node.readiness.mark_input();
+                worker.submit(sample);
+            }
+        }
+    }
+    if !tokio::task::block_in_place(|| worker.shutdown()) {
+        anyhow::bail!("the localiser worker panicked");
+    }
+    Ok(())
+}
+
+/// The `conesight-localiser` command line.
+#[derive(Debug, clap::Parser)]
+#[command(
+    name = "conesight-localiser",
+    version,
+    about = "Locates cones in 3D: keypoints + camera info in, cones out."
+)]
+struct Cli {
+    #[command(subcommand)]
+    healthcheck: Option<conesight_pipeline::node::ServiceCommand>,
+    #[command(flatten)]
+    args: LocaliserArgs,
+}
+
+/// The whole `main` of `conesight-localiser` on the command line `argv` (program name first):
+/// parses it, runs the service (or `healthcheck`) on a tokio runtime, returns the exit code.
+pub fn main_from(argv: Vec<std::ffi::OsString>) -> std::process::ExitCode {
+    use conesight_pipeline::node::{MAX_INPUT_AGE, parse_service_cli, run_service_binary};
+    let cli: Cli = match parse_service_cli(argv) {
+        Ok(cli) => cli,
+        Err(code) => return code,
+    };
+    let args = cli.args;
+    let common = args.common.clone();
+    run_service_binary(
+        "localiser",
+        cli.healthcheck,
+        common,
+        Some(MAX_INPUT_AGE),
+        |node, shutdown| async move { run(&args, node, shutdown).await },
+    )
+}

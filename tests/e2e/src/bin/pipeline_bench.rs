@@ -1,0 +1,293 @@
+//! The pipeline benchmark: 1920x1200 frames through the same stages in-process and as four
+//! service processes over Zenoh on loopback, in one run, printed as tables:
+//! per-stage latency (p50/p99), end-to-end latency and output rate at a sweep of camera rates,
+//! the highest rate sustained without latency growth, and the cost of the bus hops as a ratio
+//! against the in-process pipeline.
+//!
+//! ```text
+//! cargo build --release -p conesight-e2e && target/release/pipeline-bench [--seconds 8]
+//! ```
+//! (`make bench-pipeline`). Uses `models/detector.onnx` when shipped, else the random-init
+//! detector of `build/detector/random-init.onnx` (same network, same cost; say which).
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use conesight_bus::{Stream, Topics};
+use conesight_e2e::{Cluster, Fixture, Observer, StreamLog};
+use conesight_pipeline::stats::{median, percentile};
+use conesight_pipeline::{InProcessPipeline, PipelineConfig, locate_detector};
+use conesight_proto::now_ns;
+
+/// Camera rates of the sweep, Hz.
+const RATES_HZ: [f64; 7] = [2.0, 5.0, 8.0, 10.0, 12.0, 15.0, 20.0];
+/// Seconds at the start of each rate that are not measured (start-up, pipeline filling).
+const WARM_UP_SECS: f64 = 2.0;
+
+fn ms(values: &[f64], p: f64) -> String {
+    percentile(values, p).map_or_else(|| "-".to_owned(), |v| format!("{v:.1}"))
+}
+
+fn detector_model() -> anyhow::Result<(PathBuf, &'static str)> {
+    let shipped = locate_detector(None);
+    if shipped.is_file() {
+        return Ok((shipped, "shipped models/detector.onnx"));
+    }
+    let probe = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../build/detector/random-init.onnx");
+    anyhow::ensure!(
+        probe.is_file(),
+        "no detector: neither models/detector.onnx nor {} (make it with `PYTHONPATH=training build/venv/bin/python -m conesight_train.detector.speed --save build/detector/random-init.onnx`)",
+        probe.display()
+    );
+    Ok((
+        probe,
+        "random-init detector (same network and cost as the trained one)",
+    ))
+}
+
+#[tokio::main]
+async fn main() -> anyhow::Result<()> {
+    let mut seconds = 8.0_f64;
+    let mut args = std::env::args().skip(1);
+    while let Some(arg) = args.next() {
+        match arg.as_str() {
+            "--seconds" => seconds = args.next().context("--seconds S")?.parse()?,
+            other => anyhow::bail!("unknown argument {other}; usage: pipeline-bench [--seconds S]"),
+        }
+    }
+    let exe = std::env::current_exe()?
+        .parent()
+        .context("no folder of the benchmark binary")?
+        .join("conesight-e2e-services");
+    anyhow::ensure!(
+        exe.is_file(),
+        "{} not built: cargo build --release -p conesight-e2e",
+        exe.display()
+    );
+    let (detector, detector_note) = detector_model()?;
+    let load = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
+    println!(
+        "pipeline benchmark: 1920x1200 frames, {detector_note}; load average {}",
+        load.split_whitespace()
+            .take(3)
+            .collect::<Vec<_>>()
+            .join(" ")
+    );
+    let fixture = Fixture::render("bench", 6)?;
+
+    // In-process reference: the same stages, one thread of calls.
+    let first = &fixture.frames[0];
+    let config = PipelineConfig {
+        detector: Some(detector.clone()),
+        ..PipelineConfig::default()
+    };
+    let mut pipeline = InProcessPipeline::load(&config, &first.camera, &first.extrinsics)?;
+    let (mut detect, mut keypoints, mut localise, mut total) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    for pass in 0..4 {
+        for frame in &fixture.frames {
+            let result = pipeline.process(&frame.image, None)?;
+            if pass > 0 {
+                detect.push(result.timings.detect.as_secs_f64() * 1e3);
+                keypoints.push(result.timings.keypoints.as_secs_f64() * 1e3);
+                localise.push(result.timings.localise.as_secs_f64() * 1e3);
+                total.push(result.timings.total.as_secs_f64() * 1e3);
+            }
+        }
+    }
+    drop(pipeline);
+    let in_process_p50 = median(&total).unwrap_or(f64::NAN);
+
+    // Over Zenoh: four processes on loopback.
+    let camera_args = |rate: f64| {
+        vec![
+            "--source".to_owned(),
+            "folder".to_owned(),
+            "--images".to_owned(),
+            fixture.dir.display().to_string(),
+            "--camera-info".to_owned(),
+            fixture.camera_yaml.display().to_string(),
+            "--extrinsics".to_owned(),
+            fixture.extrinsics_yaml.display().to_string(),
+            "--rate-hz".to_owned(),
+            rate.to_string(),
+        ]
+    };
+    let mut cluster = Cluster::new(
+        &exe,
+        &format!("bench-{}", std::process::id()),
+        &[
+            (
+                "detector",
+                vec!["--model".to_owned(), detector.display().to_string()],
+            ),
+            ("keypoints", Vec::new()),
+            ("localiser", Vec::new()),
+            ("camera", camera_args(RATES_HZ[0])),
+        ],
+    )?;
+    let observer = Observer::start(&cluster.observer_args(), "front").await?;
+    let topics = Topics::new(&cluster.namespace, "car")?;
+    let detections =
+        StreamLog::start(&observer.session, &topics, "front", Stream::Detections).await?;
+    let keypoint_log =
+        StreamLog::start(&observer.session, &topics, "front", Stream::Keypoints).await?;
+    let cones_log = StreamLog::start(&observer.session, &topics, "front", Stream::Cones).await?;
+    for name in ["detector", "keypoints", "localiser"] {
+        cluster.spawn(name)?;
+    }
+    cluster.wait_live(Duration::from_secs(60))?;
+    tokio::time::sleep(Duration::from_secs(1)).await;
+
+    struct RateRow {
+        rate: f64,
+        out_hz: f64,
+        e2e: Vec<f64>,
+        detect: Vec<f64>,
+        keypoints: Vec<f64>,
+        localise: Vec<f64>,
+        growth: f64,
+    }
+    let mut rows: Vec<RateRow> = Vec::new();
+    for rate in RATES_HZ {
+        cluster.set_args("camera", camera_args(rate));
+        cluster.spawn("camera")?;
+        let start = Instant::now();
+        tokio::time::sleep(Duration::from_secs_f64(WARM_UP_SECS)).await;
+        let from_ns = now_ns();
+        tokio::time::sleep(Duration::from_secs_f64(seconds)).await;
+        let to_ns = now_ns();
+        cluster.kill("camera")?;
+        let cones = cones_log.between(from_ns, to_ns);
+        let dets = detections.between(from_ns.saturating_sub(1_000_000_000), to_ns);
+        let kps = keypoint_log.between(from_ns.saturating_sub(1_000_000_000), to_ns);
+        let mut row = RateRow {
+            rate,
+            out_hz: cones.len() as f64 / seconds,
+            e2e: Vec::new(),
+            detect: Vec::new(),
+            keypoints: Vec::new(),
+            localise: Vec::new(),
+            growth: 0.0,
+        };
+        let mut ordered: Vec<(u64, f64)> = Vec::new();
+        for (key, c) in &cones {
+            let latency = c.received_ns.saturating_sub(c.acquisition_ns) as f64 / 1e6;
+            row.e2e.push(latency);
+            ordered.push((c.received_ns, latency));
+            if let (Some(d), Some(k)) = (dets.get(key), kps.get(key)) {
+                row.detect
+                    .push(d.publish_ns.saturating_sub(d.acquisition_ns) as f64 / 1e6);
+                row.keypoints
+                    .push(k.publish_ns.saturating_sub(d.publish_ns) as f64 / 1e6);
+                row.localise
+                    .push(c.publish_ns.saturating_sub(k.publish_ns) as f64 / 1e6);
+            }
+        }
+        ordered.sort_by_key(|(at, _)| *at);
+        let third = ordered.len() / 3;
+        if third > 0 {
+            let early: Vec<f64> = ordered[..third].iter().map(|(_, l)| *l).collect();
+            let late: Vec<f64> = ordered[ordered.len() - third..]
+                .iter()
+                .map(|(_, l)| *l)
+                .collect();
+            row.growth = median(&late).unwrap_or(0.0) - median(&early).unwrap_or(0.0);
+        }
+        println!(
+            "  rate {rate:>4.0} Hz: {:.1} Hz out, end-to-end p50 {} ms p99 {} ms ({:.0} s)",
+            row.out_hz,
+            ms(&row.e2e, 50.0),
+            ms(&row.e2e, 99.0),
+            start.elapsed().as_secs_f64()
+        );
+        rows.push(row);
+        tokio::time::sleep(Duration::from_millis(500)).await;
+    }
+    let dropped: Vec<String> = ["detector", "keypoints", "localiser"]
+        .iter()
+        .map(|n| {
+            format!(
+                "{n} {}",
+                cluster.metric(n, "conesight_frames_dropped_total")
+            )
+        })
+        .collect();
+    drop(cluster);
+
+    println!(
+        "\n### In-process reference ({} frames x 3 passes, one thread of calls)\n",
+        fixture.frames.len()
+    );
+    println!("| stage | p50 ms | p99 ms |\n|---|---|---|");
+    for (name, values) in [
+        ("detector", &detect),
+        ("keypoints (crops + 1 batched call)", &keypoints),
+        ("localiser (PnP)", &localise),
+        ("total", &total),
+    ] {
+        println!("| {name} | {} | {} |", ms(values, 50.0), ms(values, 99.0));
+    }
+    println!(
+        "\nin-process capacity: {:.1} frames/s (1 / mean total)",
+        1e3 / (total.iter().sum::<f64>() / total.len().max(1) as f64)
+    );
+    println!(
+        "\n### Over Zenoh: camera, detector, keypoints, localiser as 4 processes on loopback (raw RGB8 frames, shared memory)\n"
+    );
+    println!(
+        "| camera Hz | out Hz | e2e p50 ms | e2e p99 ms | latency growth ms | detector p50 ms | keypoints p50 ms | localiser p50 ms | bus / in-process (p50) |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|");
+    let mut best_rate = 0.0_f64;
+    for row in &rows {
+        let p50 = median(&row.e2e).unwrap_or(f64::NAN);
+        let sustained = row.out_hz >= 0.95 * row.rate && row.growth <= 0.2 * p50 + 5.0;
+        if sustained {
+            best_rate = best_rate.max(row.rate);
+        }
+        println!(
+            "| {:.0} | {:.1} | {} | {} | {:+.1} | {} | {} | {} | {:.2} |",
+            row.rate,
+            row.out_hz,
+            ms(&row.e2e, 50.0),
+            ms(&row.e2e, 99.0),
+            row.growth,
+            ms(&row.detect, 50.0),
+            ms(&row.keypoints, 50.0),
+            ms(&row.localise, 50.0),
+            p50 / in_process_p50
+        );
+    }
+    let at_low = rows
+        .first()
+        .and_then(|r| median(&r.e2e))
+        .unwrap_or(f64::NAN);
+    let ten = rows.iter().find(|r| (r.rate - 10.0).abs() < 1e-9);
+    println!(
+        "\nframes dropped (newest wins, whole sweep): {}",
+        dropped.join(", ")
+    );
+    println!(
+        "highest rate sustained (out >= 95 % of in, latency growth <= 20 % of p50 + 5 ms): {best_rate:.0} Hz"
+    );
+    println!(
+        "bus cost at {:.0} Hz: e2e p50 {at_low:.1} ms over Zenoh vs {in_process_p50:.1} ms in-process = {:.2}x (target <= 1.10x)",
+        RATES_HZ[0],
+        at_low / in_process_p50
+    );
+    if let Some(ten) = ten {
+        let p99 = percentile(&ten.e2e, 99.0).unwrap_or(f64::NAN);
+        println!(
+            "10 Hz target: {:.1} Hz out, p99 {p99:.1} ms (target: 10 Hz with p99 <= 100 ms): {}",
+            ten.out_hz,
+            if ten.out_hz >= 9.5 && p99 <= 100.0 {
+                "PASS"
+            } else {
+                "FAIL"
+            }
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,479 @@
+//! # conesight-e2e
+//!
+//! The harness of the end-to-end tests (`tests/`) and of the pipeline benchmark
+//! (`src/bin/pipeline_bench.rs`): rendered fixtures with ground truth on disk ([`Fixture`]),
+//! a cluster of service processes on loopback with explicit endpoints and free ports
+//! ([`Cluster`]), an observer session collecting the cones ([`Observer`]) and a plain HTTP
+//! scrape of `/metrics` ([`http_get`]).
+
+use std::collections::BTreeMap;
+use std::io::{Read, Write};
+use std::net::TcpStream;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use conesight_bus::{Stream, Topics, ZenohArgs, declare_subscriber, decode, open_session};
+use conesight_pipeline::boxes::kitti_line_of;
+use conesight_pipeline::{
+    SourceFrame, SyntheticParams, SyntheticSource, detector_is_trained, locate_detector,
+};
+use conesight_proto::{LocatedCone, now_ns, pb};
+
+/// A free TCP port on 127.0.0.1 (bound and released; good enough for tests).
+pub fn free_port() -> anyhow::Result<u16> {
+    Ok(std::net::TcpListener::bind("127.0.0.1:0")?
+        .local_addr()?
+        .port())
+}
+
+/// Rendered frames with exact truth, written as PNGs with KITTI label files and the camera's
+/// calibration, for a camera service reading a folder.
+#[derive(Debug)]
+pub struct Fixture {
+    /// The folder.
+    pub dir: PathBuf,
+    /// The frames, in file order (frame `i` is published as sequence `i`, `i + n`, ...).
+    pub frames: Vec<SourceFrame>,
+    /// ROS camera_info YAML.
+    pub camera_yaml: PathBuf,
+    /// Extrinsics YAML.
+    pub extrinsics_yaml: PathBuf,
+}
+
+impl Fixture {
+    /// Renders `count` frames of the default synthetic sequence into a fresh folder `name`
+    /// under the system temp dir.
+    pub fn render(name: &str, count: u64) -> anyhow::Result<Self> {
+        let dir = std::env::temp_dir().join(format!("conesight-e2e-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir)?;
+        let source = SyntheticSource::new(SyntheticParams::default())?;
+        let frames = source.preload(count, false)?;
+        for frame in &frames {
+            let stem = format!("frame_{:04}", frame.index);
+            frame.image.save(dir.join(format!("{stem}.png")))?;
+            let labels: Vec<String> = frame
+                .truth
+                .as_ref()
+                .map(|t| t.detections(false).iter().map(kitti_line_of).collect())
+                .unwrap_or_default();
+            std::fs::write(dir.join(format!("{stem}.txt")), labels.join("\n"))?;
+        }
+        let camera_yaml = dir.join("camera.yaml");
+        std::fs::write(&camera_yaml, source.camera().to_ros_yaml("front"))?;
+        let extrinsics_yaml = dir.join("extrinsics.yaml");
+        std::fs::write(&extrinsics_yaml, source.extrinsics().to_yaml())?;
+        Ok(Self {
+            dir,
+            frames,
+            camera_yaml,
+            extrinsics_yaml,
+        })
+    }
+
+    /// The frame published as `sequence`.
+    pub fn frame(&self, sequence: u64) -> Option<&SourceFrame> {
+        self.frames
+            .get((sequence % self.frames.len().max(1) as u64) as usize)
+    }
+}
+
+impl Drop for Fixture {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+/// The detector the tests use: the shipped one when trained, else none (the camera then
+/// publishes the renderer's boxes).
+pub fn trained_detector() -> Option<PathBuf> {
+    let path = locate_detector(None);
+    detector_is_trained(&path).then_some(path)
+}
+
+/// One service process of a [`Cluster`].
+#[derive(Debug)]
+struct Member {
+    zenoh_port: u16,
+    http_port: u16,
+    extra: Vec<String>,
+    child: Option<Child>,
+}
+
+/// Service processes on loopback: each listens on its own port and connects to every other
+/// one (peer mode, explicit endpoints, multicast scouting off), in a namespace of its own.
+#[derive(Debug)]
+pub struct Cluster {
+    exe: PathBuf,
+    /// The run namespace.
+    pub namespace: String,
+    members: BTreeMap<String, Member>,
+    /// Extra Zenoh port for an observer session.
+    pub observer_port: u16,
+}
+
+impl Cluster {
+    /// A cluster of `services` (name, extra args), not started; `exe` is the
+    /// `conesight-e2e-services` binary.
+    pub fn new(
+        exe: &Path,
+        namespace: &str,
+        services: &[(&str, Vec<String>)],
+    ) -> anyhow::Result<Self> {
+        let mut members = BTreeMap::new();
+        for (name, extra) in services {
+            members.insert(
+                (*name).to_owned(),
+                Member {
+                    zenoh_port: free_port()?,
+                    http_port: free_port()?,
+                    extra: extra.clone(),
+                    child: None,
+                },
+            );
+        }
+        Ok(Self {
+            exe: exe.to_path_buf(),
+            namespace: namespace.to_owned(),
+            members,
+            observer_port: free_port()?,
+        })
+    }
+
+    fn endpoint(port: u16) -> String {
+        format!("tcp/127.0.0.1:{port}")
+    }
+
+    /// Every endpoint except `port`'s.
+    fn others(&self, port: u16) -> String {
+        self.members
+            .values()
+            .map(|m| m.zenoh_port)
+            .chain([self.observer_port])
+            .filter(|p| *p != port)
+            .map(Self::endpoint)
+            .collect::<Vec<_>>()
+            .join(",")
+    }
+
+    /// Starts `name`.
+    pub fn spawn(&mut self, name: &str) -> anyhow::Result<()> {
+        let member = self
+            .members
+            .get(name)
+            .with_context(|| format!("no service {name}"))?;
+        let mut command = Command::new(&self.exe);
+        command
+            .arg(name)
+            .arg("--zenoh-listen")
+            .arg(Self::endpoint(member.zenoh_port))
+            .arg("--zenoh-connect")
+            .arg(self.others(member.zenoh_port))
+            .arg("--http-addr")
+            .arg(format!("127.0.0.1:{}", member.http_port))
+            .arg("--namespace")
+            .arg(&self.namespace)
+            .args(&member.extra)
+            .stdin(Stdio::null())
+            .stdout(Stdio::null());
+        if std::env::var_os("CONESIGHT_E2E_LOGS").is_none() {
+            command.stderr(Stdio::null()).env("RUST_LOG", "warn");
+        }
+        let child = command
+            .spawn()
+            .with_context(|| format!("spawning {name}"))?;
+        if let Some(member) = self.members.get_mut(name) {
+            member.child = Some(child);
+        }
+        Ok(())
+    }
+
+    /// Replaces the extra arguments `name` gets at its next start.
+    pub fn set_args(&mut self, name: &str, extra: Vec<String>) {
+        if let Some(member) = self.members.get_mut(name) {
+            member.extra = extra;
+        }
+    }
+
+    /// Starts every service.
+    pub fn spawn_all(&mut self) -> anyhow::Result<()> {
+        let names: Vec<String> = self.members.keys().cloned().collect();
+        for name in names {
+            self.spawn(&name)?;
+        }
+        Ok(())
+    }
+
+    /// Kills `name` (SIGKILL) and reaps it.
+    pub fn kill(&mut self, name: &str) -> anyhow::Result<()> {
+        if let Some(mut child) = self.members.get_mut(name).and_then(|m| m.child.take()) {
+            child.kill()?;
+            child.wait()?;
+        }
+        Ok(())
+    }
+
+    /// Process id of `name`, while running.
+    pub fn pid(&self, name: &str) -> Option<u32> {
+        self.members.get(name)?.child.as_ref().map(Child::id)
+    }
+
+    /// True when `name` runs (has not exited).
+    pub fn is_running(&mut self, name: &str) -> bool {
+        self.members
+            .get_mut(name)
+            .and_then(|m| m.child.as_mut())
+            .is_some_and(|child| matches!(child.try_wait(), Ok(None)))
+    }
+
+    /// Resident memory of `name`, KiB (Linux `/proc`).
+    pub fn rss_kib(&self, name: &str) -> Option<u64> {
+        let status = std::fs::read_to_string(format!("/proc/{}/status", self.pid(name)?)).ok()?;
+        status
+            .lines()
+            .find_map(|l| l.strip_prefix("VmRSS:"))
+            .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
+    }
+
+    /// `GET path` on `name`'s HTTP server: (status, body).
+    pub fn http(&self, name: &str, path: &str) -> anyhow::Result<(u16, String)> {
+        let member = self
+            .members
+            .get(name)
+            .with_context(|| format!("no service {name}"))?;
+        http_get(member.http_port, path)
+    }
+
+    /// A metric's value on `name`'s `/metrics` (the line starting with `series`, e.g.
+    /// `conesight_errors_total{kind="oversize"}`); 0 when absent.
+    pub fn metric(&self, name: &str, series: &str) -> f64 {
+        self.http(name, "/metrics")
+            .ok()
+            .and_then(|(_, body)| {
+                body.lines()
+                    .find(|l| l.starts_with(series) && l[series.len()..].starts_with(' '))
+                    .and_then(|l| l.rsplit(' ').next())
+                    .and_then(|v| v.parse().ok())
+            })
+            .unwrap_or(0.0)
+    }
+
+    /// Waits until every started service answers `/livez`.
+    pub fn wait_live(&self, timeout: Duration) -> anyhow::Result<()> {
+        let deadline = Instant::now() + timeout;
+        for (name, _) in self.members.iter().filter(|(_, m)| m.child.is_some()) {
+            loop {
+                if matches!(self.http(name, "/livez"), Ok((200, _))) {
+                    break;
+                }
+                anyhow::ensure!(
+                    Instant::now() < deadline,
+                    "{name} did not come up within {timeout:?}"
+                );
+                std::thread::sleep(Duration::from_millis(50));
+            }
+        }
+        Ok(())
+    }
+
+    /// Zenoh args of an observer session joining the cluster.
+    pub fn observer_args(&self) -> ZenohArgs {
+        ZenohArgs {
+            listen: vec![Self::endpoint(self.observer_port)],
+            connect: self
+                .members
+                .values()
+                .map(|m| Self::endpoint(m.zenoh_port))
+                .collect(),
+            namespace: self.namespace.clone(),
+            ..ZenohArgs::default()
+        }
+    }
+}
+
+impl Drop for Cluster {
+    fn drop(&mut self) {
+        for member in self.members.values_mut() {
+            if let Some(mut child) = member.child.take() {
+                let _ = child.kill();
+                let _ = child.wait();
+            }
+        }
+    }
+}
+
+/// `GET path` on 127.0.0.1:`port`: (status, body).
+pub fn http_get(port: u16, path: &str) -> anyhow::Result<(u16, String)> {
+    let mut stream = TcpStream::connect(("127.0.0.1", port))?;
+    stream.set_read_timeout(Some(Duration::from_secs(5)))?;
+    write!(
+        stream,
+        "GET {path} HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n"
+    )?;
+    let mut response = String::new();
+    stream.read_to_string(&mut response)?;
+    let status = response
+        .get(9..12)
+        .and_then(|s| s.parse().ok())
+        .context("not an HTTP response")?;
+    let body = response
+        .split_once("\r\n\r\n")
+        .map(|(_, b)| b.to_owned())
+        .unwrap_or_default();
+    Ok((status, body))
+}
+
+/// One `Cones` message as received.
+#[derive(Debug, Clone)]
+pub struct Received {
+    /// Frame sequence.
+    pub sequence: u64,
+    /// Acquisition time, ns since the epoch.
+    pub acquisition_ns: u64,
+    /// Latency from acquisition to reception here, seconds.
+    pub latency_secs: f64,
+    /// When it arrived (test clock).
+    pub at: Instant,
+    /// The cones.
+    pub cones: Vec<LocatedCone>,
+}
+
+/// An observer session collecting every `Cones` message of one camera.
+#[derive(Debug)]
+pub struct Observer {
+    /// Everything received so far.
+    pub received: Arc<Mutex<Vec<Received>>>,
+    /// The session (kept open).
+    pub session: conesight_bus::zenoh::Session,
+}
+
+impl Observer {
+    /// Joins with `args` and collects `camera`'s cones in the background.
+    pub async fn start(args: &ZenohArgs, camera: &str) -> anyhow::Result<Self> {
+        let session = open_session(args).await?;
+        let topics = Topics::from_args(args)?;
+        let subscriber =
+            declare_subscriber(&session, topics.key(camera, Stream::Cones)?, Stream::Cones).await?;
+        let received = Arc::new(Mutex::new(Vec::new()));
+        let sink = received.clone();
+        tokio::spawn(async move {
+            while let Ok(sample) = subscriber.recv_async().await {
+                let Ok(message) = decode::<pb::Cones>(sample.payload()) else {
+                    continue;
+                };
+                let Some(header) = message.header.clone() else {
+                    continue;
+                };
+                let cones = message.to_core().unwrap_or_default();
+                if let Ok(mut sink) = sink.lock() {
+                    sink.push(Received {
+                        sequence: header.frame_sequence,
+                        acquisition_ns: header.acquisition_time_ns,
+                        latency_secs: now_ns().saturating_sub(header.acquisition_time_ns) as f64
+                            / 1e9,
+                        at: Instant::now(),
+                        cones,
+                    });
+                }
+            }
+        });
+        Ok(Self { received, session })
+    }
+
+    /// A copy of everything received.
+    pub fn snapshot(&self) -> Vec<Received> {
+        self.received.lock().map(|r| r.clone()).unwrap_or_default()
+    }
+
+    /// Number of messages received.
+    pub fn count(&self) -> usize {
+        self.received.lock().map(|r| r.len()).unwrap_or(0)
+    }
+
+    /// Waits until `predicate` holds on the messages received, or `timeout`; returns whether
+    /// it held.
+    pub async fn wait_for(
+        &self,
+        timeout: Duration,
+        predicate: impl Fn(&[Received]) -> bool,
+    ) -> bool {
+        let deadline = Instant::now() + timeout;
+        loop {
+            let held = self.received.lock().map(|r| predicate(&r)).unwrap_or(false);
+            if held {
+                return true;
+            }
+            if Instant::now() >= deadline {
+                return false;
+            }
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+    }
+}
+
+/// One message of a stream as seen by a [`StreamLog`].
+#[derive(Debug, Clone, Copy)]
+pub struct Stamp {
+    /// Frame sequence.
+    pub sequence: u64,
+    /// Acquisition time of the frame, ns.
+    pub acquisition_ns: u64,
+    /// Publish time of the message, ns.
+    pub publish_ns: u64,
+    /// When it arrived here, ns.
+    pub received_ns: u64,
+}
+
+/// Headers of every message of one stream of one camera, collected in the background.
+#[derive(Debug, Clone, Default)]
+pub struct StreamLog {
+    /// Everything received so far.
+    pub stamps: Arc<Mutex<Vec<Stamp>>>,
+}
+
+impl StreamLog {
+    /// Collects `stream` of `camera` on `session`.
+    pub async fn start(
+        session: &conesight_bus::zenoh::Session,
+        topics: &Topics,
+        camera: &str,
+        stream: Stream,
+    ) -> anyhow::Result<Self> {
+        let subscriber = declare_subscriber(session, topics.key(camera, stream)?, stream).await?;
+        let log = Self::default();
+        let sink = log.stamps.clone();
+        tokio::spawn(async move {
+            while let Ok(sample) = subscriber.recv_async().await {
+                let received_ns = now_ns();
+                let Ok(header) = conesight_proto::peek_header(&sample.payload().to_bytes()) else {
+                    continue;
+                };
+                if let Ok(mut sink) = sink.lock() {
+                    sink.push(Stamp {
+                        sequence: header.frame_sequence,
+                        acquisition_ns: header.acquisition_time_ns,
+                        publish_ns: header.publish_time_ns,
+                        received_ns,
+                    });
+                }
+            }
+        });
+        Ok(log)
+    }
+
+    /// Stamps received between `from_ns` and `to_ns`, keyed by (sequence, acquisition).
+    pub fn between(&self, from_ns: u64, to_ns: u64) -> BTreeMap<(u64, u64), Stamp> {
+        self.stamps
+            .lock()
+            .map(|s| {
+                s.iter()
+                    .filter(|t| (from_ns..to_ns).contains(&t.received_ns))
+                    .map(|t| ((t.sequence, t.acquisition_ns), *t))
+                    .collect()
+            })
+            .unwrap_or_default()
+    }
+}
