@@ -1,0 +1,129 @@
+#!/usr/bin/env bash
+# Builds the base image every service image starts FROM: a minimal Debian rootfs made with
+# debootstrap (--variant=minbase), trimmed, and imported with `docker import`. No registry is
+# needed, only a Debian mirror.
+#
+#   deploy/build-base.sh                 # conesight/base:<host release>, skipped if it exists
+#   deploy/build-base.sh --force         # rebuild even if the image exists
+#   deploy/build-base.sh --arch arm64    # foreign arch (Jetson): needs qemu-user-static + binfmt; untested
+#   deploy/build-base.sh --release bookworm  # on a non-Debian host (Ubuntu, L4T)
+#
+# The service binaries are built on the host and linked against the host's glibc, so the base
+# defaults to the host's Debian release (VERSION_CODENAME in /etc/os-release). The rootfs and
+# its tarball stay in build/base/ (git-ignored). Needs root (debootstrap creates device nodes
+# and chroots); uses sudo when not root.
+set -euo pipefail
+
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+
+release=""
+arch=""
+mirror="${DEBIAN_MIRROR:-http://deb.debian.org/debian}"
+force=0
+
+usage() {
+    sed -n '2,15p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'
+}
+
+while [[ $# -gt 0 ]]; do
+    case "$1" in
+        --force) force=1 ;;
+        --release) release="$2"; shift ;;
+        --arch) arch="$2"; shift ;;
+        --mirror) mirror="$2"; shift ;;
+        -h | --help) usage; exit 0 ;;
+        *) echo "build-base.sh: unknown argument: $1" >&2; usage >&2; exit 2 ;;
+    esac
+    shift
+done
+
+if [[ -z "$release" ]]; then
+    # shellcheck disable=SC1091
+    release="$(. /etc/os-release; if [[ "${ID:-}" == debian ]]; then echo "${VERSION_CODENAME:-}"; fi)"
+fi
+if [[ -z "$release" ]]; then
+    # Not Debian (a Jetson's L4T is Ubuntu): say which Debian release to build, one whose glibc
+    # is at least the one the binaries were linked against (bookworm: 2.36).
+    echo "build-base.sh: the host is not Debian; pass --release (e.g. --release bookworm)" >&2
+    exit 2
+fi
+host_arch="$(dpkg --print-architecture)"
+arch="${arch:-$host_arch}"
+
+tag="conesight/base:${release}"
+[[ "$arch" != "$host_arch" ]] && tag="${tag}-${arch}"
+
+if [[ $force -eq 0 ]] && docker image inspect "$tag" >/dev/null 2>&1; then
+    echo "build-base.sh: $tag exists (use --force to rebuild)"
+    exit 0
+fi
+
+SUDO=()
+if [[ $(id -u) -ne 0 ]]; then
+    if command -v sudo >/dev/null; then SUDO=(sudo); else
+        echo "build-base.sh: needs root or sudo (debootstrap)" >&2
+        exit 1
+    fi
+fi
+
+if ! command -v debootstrap >/dev/null; then
+    echo "build-base.sh: installing debootstrap"
+    "${SUDO[@]}" apt-get install -y --no-install-recommends debootstrap
+fi
+
+work="$ROOT/build/base/${release}-${arch}"
+rootfs="$work/rootfs"
+tarball="$work/rootfs.tar"
+"${SUDO[@]}" rm -rf "$rootfs" "$tarball"
+mkdir -p "$work"
+
+foreign=()
+if [[ "$arch" != "$host_arch" ]]; then
+    # debootstrap runs the second stage inside the chroot, which needs the target's binaries to
+    # execute here: qemu-user-static with binfmt_misc registered. Not tested on our machines.
+    foreign=(--foreign)
+fi
+
+echo "build-base.sh: debootstrap $release ($arch, minbase) into $rootfs"
+"${SUDO[@]}" debootstrap --variant=minbase --arch="$arch" "${foreign[@]}" \
+    "$release" "$rootfs" "$mirror"
+
+if [[ ${#foreign[@]} -gt 0 ]]; then
+    qemu="/usr/bin/qemu-$(case "$arch" in arm64) echo aarch64 ;; *) echo "$arch" ;; esac)-static"
+    if [[ ! -x "$qemu" ]]; then
+        echo "build-base.sh: $qemu missing (apt-get install qemu-user-static binfmt-support)" >&2
+        exit 1
+    fi
+    "${SUDO[@]}" cp "$qemu" "$rootfs/usr/bin/"
+    "${SUDO[@]}" chroot "$rootfs" /debootstrap/debootstrap --second-stage
+    "${SUDO[@]}" rm -f "$rootfs/usr/bin/$(basename "$qemu")"
+fi
+
+# Trim what a service container never uses (as Debian's own -slim images do): package lists
+# and caches, documentation, man pages, locales other than C.
+echo "build-base.sh: trimming"
+"${SUDO[@]}" rm -rf \
+    "$rootfs"/var/lib/apt/lists/* \
+    "$rootfs"/var/cache/apt/* \
+    "$rootfs"/var/cache/debconf/*-old \
+    "$rootfs"/var/log/* \
+    "$rootfs"/usr/share/doc/* \
+    "$rootfs"/usr/share/man/* \
+    "$rootfs"/usr/share/info/* \
+    "$rootfs"/usr/share/locale/* \
+    "$rootfs"/usr/share/lintian \
+    "$rootfs"/tmp/* \
+    "$rootfs"/debootstrap
+# The image has no network configuration of its own: Docker bind-mounts these at run time.
+"${SUDO[@]}" truncate -s 0 "$rootfs/etc/hostname" "$rootfs/etc/resolv.conf" 2>/dev/null || true
+
+"${SUDO[@]}" tar --numeric-owner -C "$rootfs" -cf "$tarball" .
+echo "build-base.sh: importing $tag"
+platform=()
+[[ "$arch" != "$host_arch" ]] && platform=(--platform "linux/$arch")
+docker import "${platform[@]}" \
+    --change 'ENV LANG=C.UTF-8' \
+    --change 'CMD ["/bin/bash"]' \
+    --message "debootstrap --variant=minbase $release $arch" \
+    "$tarball" "$tag"
+docker image ls "$tag"

@@ -1,0 +1,119 @@
+#!/usr/bin/env bash
+# Builds the service images from binaries compiled on the host (no Rust toolchain in Docker):
+#
+#   deploy/build-images.sh                  # base if missing, cargo build --release, all images
+#   deploy/build-images.sh --no-cargo       # reuse target/release binaries as they are
+#   deploy/build-images.sh camera localiser # only these targets (camera detector keypoints localiser cli)
+#   deploy/build-images.sh --release bookworm  # base release on a non-Debian host (default: the host's)
+#
+# Images: conesight/<target>:latest and conesight/<target>:<git short rev>. The build context is
+# staged in build/images/context/ (git-ignored) so Docker never sees target/ or the venv.
+set -euo pipefail
+
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$ROOT"
+
+ALL_TARGETS=(camera detector keypoints localiser cli)
+# target -> cargo package and binary
+declare -A PACKAGE=(
+    [camera]=conesight-camera-service
+    [detector]=conesight-detector-service
+    [keypoints]=conesight-keypoints-service
+    [localiser]=conesight-localiser-service
+    [cli]=conesight-cli
+)
+declare -A BINARY=(
+    [camera]=conesight-camera
+    [detector]=conesight-detector
+    [keypoints]=conesight-keypoints
+    [localiser]=conesight-localiser
+    [cli]=conesight
+)
+ORT_LIB="build/onnxruntime/libonnxruntime.so.1.31.1"
+
+run_cargo=1
+release=""
+targets=()
+while [[ $# -gt 0 ]]; do
+    arg="$1"
+    case "$arg" in
+        --no-cargo) run_cargo=0 ;;
+        --release) release="$2"; shift ;;
+        -h | --help) sed -n '2,10p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; exit 0 ;;
+        -*) echo "build-images.sh: unknown option $arg" >&2; exit 2 ;;
+        *)
+            if [[ -z "${PACKAGE[$arg]:-}" ]]; then
+                echo "build-images.sh: unknown target $arg (one of ${ALL_TARGETS[*]})" >&2
+                exit 2
+            fi
+            targets+=("$arg")
+            ;;
+    esac
+    shift
+done
+[[ ${#targets[@]} -eq 0 ]] && targets=("${ALL_TARGETS[@]}")
+
+if [[ -z "$release" ]]; then
+    # shellcheck disable=SC1091
+    release="$(. /etc/os-release; if [[ "${ID:-}" == debian ]]; then echo "${VERSION_CODENAME:-}"; fi)"
+fi
+if [[ -z "$release" ]]; then
+    echo "build-images.sh: the host is not Debian; pass --release (e.g. --release bookworm)" >&2
+    exit 2
+fi
+base="conesight/base:${release}"
+deploy/build-base.sh --release "$release"
+
+if [[ ! -f "$ORT_LIB" ]]; then
+    echo "build-images.sh: $ORT_LIB missing; run 'make setup' first" >&2
+    exit 1
+fi
+
+# The legacy builder stages every target before the one asked for, so the context always
+# holds all binaries; build them all with one cargo call (one lock, one dependency graph).
+if [[ $run_cargo -eq 1 ]]; then
+    pkgs=()
+    for t in "${ALL_TARGETS[@]}"; do pkgs+=(-p "${PACKAGE[$t]}"); done
+    echo "build-images.sh: cargo build --release ${pkgs[*]}"
+    cargo build --release "${pkgs[@]}"
+fi
+
+ctx="build/images/context"
+rm -rf "$ctx"
+mkdir -p "$ctx/bin" "$ctx/onnxruntime" "$ctx/models" "$ctx/zenoh"
+for t in "${ALL_TARGETS[@]}"; do
+    bin="target/release/${BINARY[$t]}"
+    if [[ ! -x "$bin" ]]; then
+        echo "build-images.sh: $bin missing (cargo build --release -p ${PACKAGE[$t]})" >&2
+        exit 1
+    fi
+    cp "$bin" "$ctx/bin/"
+done
+strip --strip-debug "$ctx"/bin/* 2>/dev/null || true
+cp "$ORT_LIB" "$ctx/onnxruntime/"
+shopt -s nullglob
+cp models/*.onnx models/*.card.json models/*.md "$ctx/models/"
+cp deploy/zenoh/*.json5 "$ctx/zenoh/"
+shopt -u nullglob
+
+# Docker CLIs from 23 on use BuildKit through buildx; without the buildx plugin (as on our
+# machines) the classic builder does the job.
+if ! docker buildx version >/dev/null 2>&1; then
+    export DOCKER_BUILDKIT=0
+fi
+
+rev="$(git rev-parse --short HEAD 2>/dev/null || echo unknown)"
+for t in "${targets[@]}"; do
+    echo "build-images.sh: conesight/$t"
+    docker build --quiet \
+        --file deploy/Dockerfile \
+        --build-arg "BASE=$base" \
+        --target "$t" \
+        --label "org.opencontainers.image.revision=$rev" \
+        --label "org.opencontainers.image.source=conesight" \
+        --tag "conesight/$t:latest" \
+        --tag "conesight/$t:$rev" \
+        "$ctx"
+done
+
+docker image ls --format 'table {{.Repository}}:{{.Tag}}\t{{.Size}}' 'conesight/*:latest'
