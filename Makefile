@@ -7,13 +7,19 @@ ROOT := $(CURDIR)
 PY := $(ROOT)/build/venv/bin/python
 export ORT_DYLIB_PATH ?= $(ROOT)/build/onnxruntime/libonnxruntime.so.1.31.1
 
-.PHONY: setup demo test test-rust test-python lint bench bench-pnp clean
+.PHONY: setup demo demo-geometry test test-rust test-python lint bench bench-pnp bench-pipeline clean
 
 setup:
 	@bash scripts/setup.sh
 
-## The main job on the embedded defaults.
+## The main job on the embedded defaults: the four services in one process over an embedded
+## Zenoh session on a synthetic sequence (live table, PNGs in out/run/).
 demo: setup
+	cargo build --release -p conesight-cli
+	./target/release/conesight run
+
+## The geometry demo (cone PnP on exact keypoints, one rendered frame), PNGs in out/demo/.
+demo-geometry: setup
 	cargo build --release -p conesight-cli
 	./target/release/conesight demo
 
@@ -41,5 +47,54 @@ bench-pnp: setup
 	cargo build --release -p conesight-core --example pnp_bench
 	$(PY) bench/pnp_vs_opencv.py --bench-bin target/release/examples/pnp_bench
 
+## In-process vs over Zenoh (4 processes): per-stage latency, rate sweep, bus cost ratio.
+bench-pipeline: setup
+	cargo build --release -p conesight-e2e
+	./target/release/pipeline-bench
+
 clean:
 	rm -rf build target
+
+## Container images and the one-host compose stack (deploy/README.md). Not part of `make test`.
+DEPLOY_COMPOSE ?= $(shell docker compose version >/dev/null 2>&1 && echo "docker compose" || echo docker-compose)
+.PHONY: images compose-up compose-down deploy-check
+
+images: setup
+	deploy/build-images.sh
+
+compose-up:
+	CONESIGHT_MEMLOCK=$${CONESIGHT_MEMLOCK:-$$(deploy/memlock.sh)} $(DEPLOY_COMPOSE) -p conesight up -d
+	$(DEPLOY_COMPOSE) -p conesight ps
+
+compose-down:
+	$(DEPLOY_COMPOSE) -p conesight down -v
+
+deploy-check:
+	deploy/check.sh
+
+## The paper's experiments on our pipeline (crates/conesight-eval + conesight_train.report):
+## held-out synthetic frames (seeds 100-102) and real crops -> docs/results.md, docs/results.json,
+## docs/results/*.png. Missing models are reported as not available. Deterministic (seeded).
+EVAL_MODELS := --keypoint-model production=models/keypoints.onnx \
+	--keypoint-model baseline=models/keypoints-baseline.onnx \
+	--keypoint-model no_cross_ratio=models/keypoints-no-cr.onnx
+# The keypoint evaluation also takes training checkpoints (first existing file wins).
+REPORT_MODELS := --keypoint-model production=models/keypoints.onnx \
+	--keypoint-model baseline=models/keypoints-baseline.onnx,build/train/keypoints-baseline/best.pt \
+	--keypoint-model no_cross_ratio=models/keypoints-no-cr.onnx,build/train/keypoints-no-cr/best.pt
+.PHONY: eval eval-check
+
+eval: setup
+	@start=$$(date +%s); set -e; \
+	cargo build --release -p conesight-eval; \
+	./target/release/conesight-eval --out build/eval --patches-out build/eval/patches \
+	  $(EVAL_MODELS) --detector models/detector.onnx; \
+	PYTHONPATH=training $(PY) -m conesight_train.report --records build/eval --docs docs \
+	  --synthetic-patches build/eval/patches $(REPORT_MODELS) \
+	  --command "make eval" --started-at $$start; \
+	echo "make eval: $$(( $$(date +%s) - start )) s"
+
+## The cheap subset of `make eval` against the committed docs/results.json (CI runs it).
+eval-check: setup
+	cargo build --release -p conesight-eval
+	$(PY) scripts/check_results.py --results docs/results.json --out build/eval-check

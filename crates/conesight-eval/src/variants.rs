@@ -1,0 +1,169 @@
+//! PnP variants on the same keypoints, so the solvers are compared on identical input:
+//!
+//! | name | solver |
+//! | --- | --- |
+//! | `cone` | our cone solver (`ConeSolver`, the pipeline's localiser), weighted by the network's sigma |
+//! | `cone_ground` | the same with the base constrained to the road plane of the extrinsics |
+//! | `generic` | `solve_pnp`: EPnP + Levenberg-Marquardt on the cone's planar keypoint model |
+//! | `generic_ransac` | `solve_pnp_ransac` (default parameters) on the planar model |
+//!
+//! The planar model faces the camera, x right, y down, origin at the base centre (as an
+//! OpenCV user would write it, and as `bench/pnp_vs_opencv.py` does), so the translation is
+//! the base centre in the camera frame. OpenCV's solvers run on the same keypoints in the
+//! Python report.
+
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+use conesight_core::pnp::{RansacParams, solve_pnp, solve_pnp_ransac};
+use conesight_core::{
+    Camera, ConeClass, ConeModel, ConeObservation, ConePnpParams, ConeSolver, Extrinsics,
+    KEYPOINT_COUNT,
+};
+use conesight_pipeline::keypoint_stage::REFERENCE_SIGMA_PX;
+use nalgebra::Point3;
+
+use crate::records::Estimate;
+
+/// Names of the variants, in table order.
+pub const VARIANTS: [&str; 4] = ["cone", "cone_ground", "generic", "generic_ransac"];
+
+/// The solvers of one calibration.
+#[derive(Debug, Clone)]
+pub struct Variants {
+    camera: Camera,
+    cone: [ConeSolver; 2],
+    cone_ground: [ConeSolver; 2],
+    planar: [[Point3<f64>; KEYPOINT_COUNT]; 2],
+    ransac: RansacParams,
+}
+
+fn planar_model(model: &ConeModel) -> [Point3<f64>; KEYPOINT_COUNT] {
+    model
+        .keypoints_in_cone_planar()
+        .map(|p| Point3::new(p.x, -p.z, 0.0))
+}
+
+fn size_index(class: ConeClass) -> usize {
+    usize::from(class.is_large())
+}
+
+impl Variants {
+    /// Solvers for `camera` mounted by `extrinsics` (the pipeline's parameters).
+    pub fn new(
+        camera: &Camera,
+        extrinsics: &Extrinsics,
+    ) -> Result<Self, conesight_core::GeometryError> {
+        let params = ConePnpParams::for_keypoint_sigma(REFERENCE_SIGMA_PX);
+        let free = params.with_extrinsics(extrinsics, false);
+        let ground = params.with_extrinsics(extrinsics, true);
+        let (small, large) = (ConeModel::small(), ConeModel::large());
+        Ok(Self {
+            camera: *camera,
+            cone: [
+                ConeSolver::new(camera, &small, &free)?,
+                ConeSolver::new(camera, &large, &free)?,
+            ],
+            cone_ground: [
+                ConeSolver::new(camera, &small, &ground)?,
+                ConeSolver::new(camera, &large, &ground)?,
+            ],
+            planar: [planar_model(&small), planar_model(&large)],
+            ransac: RansacParams::default(),
+        })
+    }
+
+    /// Every variant on `observation` of a cone of `class`, with its time.
+    pub fn solve_all(
+        &self,
+        class: ConeClass,
+        observation: &ConeObservation,
+    ) -> BTreeMap<String, Estimate> {
+        let size = size_index(class);
+        let mut out = BTreeMap::new();
+        for (name, solver) in [
+            ("cone", &self.cone[size]),
+            ("cone_ground", &self.cone_ground[size]),
+        ] {
+            let start = Instant::now();
+            let result = solver.solve(observation);
+            let micros = start.elapsed().as_secs_f64() * 1e6;
+            out.insert(
+                name.to_owned(),
+                match result {
+                    Ok(e) => Estimate::found(e.position_in_camera, micros),
+                    Err(error) => Estimate::failed(error.to_string(), micros),
+                },
+            );
+        }
+        let object = &self.planar[size];
+        let image = &observation.keypoints_px;
+        let start = Instant::now();
+        let generic = solve_pnp(&self.camera, object, image);
+        let micros = start.elapsed().as_secs_f64() * 1e6;
+        out.insert(
+            "generic".to_owned(),
+            match generic {
+                Ok(s) => Estimate::found(
+                    Point3::from(s.camera_from_object.translation.vector),
+                    micros,
+                ),
+                Err(error) => Estimate::failed(error.to_string(), micros),
+            },
+        );
+        let start = Instant::now();
+        let ransac = solve_pnp_ransac(&self.camera, object, image, &self.ransac);
+        let micros = start.elapsed().as_secs_f64() * 1e6;
+        out.insert(
+            "generic_ransac".to_owned(),
+            match ransac {
+                Ok(s) => Estimate::found(
+                    Point3::from(s.camera_from_object.translation.vector),
+                    micros,
+                ),
+                Err(error) => Estimate::failed(error.to_string(), micros),
+            },
+        );
+        out
+    }
+
+    /// The planar object points of a class (written to `meta.json` for OpenCV).
+    pub fn planar_points(&self, class: ConeClass) -> [Point3<f64>; KEYPOINT_COUNT] {
+        self.planar[size_index(class)]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use conesight_core::silhouette_keypoints;
+    use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+
+    #[test]
+    fn every_variant_finds_an_exact_cone() {
+        let camera = Camera::paper_default();
+        let extrinsics = Extrinsics::paper_default();
+        let variants = Variants::new(&camera, &extrinsics).unwrap();
+        // A cone standing on the road 8 m ahead, 1 m to the left, in the vehicle frame.
+        let base_in_vehicle = Point3::new(8.0, 1.0, 0.0);
+        let camera_from_vehicle = extrinsics.camera_from_vehicle();
+        let camera_from_cone = camera_from_vehicle
+            * Isometry3::from_parts(
+                Translation3::from(base_in_vehicle.coords),
+                UnitQuaternion::identity(),
+            );
+        let keypoints =
+            silhouette_keypoints(&camera, &ConeModel::small(), &camera_from_cone).unwrap();
+        let truth = camera_from_vehicle * base_in_vehicle;
+        let all = variants.solve_all(ConeClass::Blue, &ConeObservation::new(keypoints));
+        assert_eq!(all.len(), VARIANTS.len());
+        for name in ["cone", "cone_ground"] {
+            let p = all[name].position_m.unwrap();
+            let error = (Point3::from(p) - truth).norm();
+            assert!(error < 0.02, "{name}: {error} m");
+        }
+        // The planar model is an approximation: a few per cent at 8 m.
+        let p = all["generic"].position_m.unwrap();
+        assert!((Point3::from(p) - truth).norm() < 0.5);
+    }
+}
