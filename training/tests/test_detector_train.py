@@ -1,7 +1,10 @@
 """Detector training: a few steps on toy frames lower the loss, resume continues the same run,
 and the ONNX export matches PyTorch."""
 
+from dataclasses import replace
+
 import numpy as np
+import pytest
 import torch
 
 from conesight_train.detector.band import BandParams
@@ -59,9 +62,10 @@ def test_training_run_checkpoints_and_resumes(tmp_path):
     assert resumed["history"][:6] == summary["history"]  # the old history is kept, not redone
 
 
-def test_onnx_export_matches_pytorch(tmp_path):
+@pytest.mark.parametrize("row_features", [False, True])
+def test_onnx_export_matches_pytorch(tmp_path, row_features):
     torch.manual_seed(0)
-    model = ConeDetector(TINY).eval()
+    model = ConeDetector(replace(TINY, row_features=row_features)).eval()
     # Non-trivial batch-norm statistics, so the check covers them.
     for m in model.modules():
         if isinstance(m, torch.nn.BatchNorm2d):
@@ -74,6 +78,24 @@ def test_onnx_export_matches_pytorch(tmp_path):
     assert parity.max_box_diff_px < 1e-3 and parity.max_score_diff < 1e-5, parity
     assert parity.peak_flips <= 1e-3 * parity.cells, parity
     assert path.stat().st_size < 20e6
+
+
+def test_row_features_tell_rows_apart():
+    torch.manual_seed(0)
+    model = ConeDetector(replace(TINY, row_features=True)).eval()
+    assert DetectorParams.from_dict(model.params.to_dict()).row_features
+    image = torch.full((1, 3, 64, 128), 100.0)
+    with torch.no_grad():
+        with_rows, _ = model(image)
+        model.row_embed.weight.zero_()
+        model.row_embed.bias.zero_()
+        without, _ = model(image)
+    # What the row features add differs from row to row.
+    added = (with_rows - without)[0, :, :, 8]
+    assert float(added.std(dim=1).max()) > 1e-4
+    # Old checkpoints (no row_features key) load as before.
+    legacy = {k: v for k, v in TINY.to_dict().items() if k != "row_features"}
+    assert not DetectorParams.from_dict(legacy).row_features
 
 
 def test_default_network_is_light():

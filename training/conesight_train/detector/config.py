@@ -36,6 +36,8 @@ class TrainConfig:
     workers: int = 1
     val_every: int = 250
     val_limit: int = 100
+    # Repeat-factor sampling threshold t (detector/sampling.py); 0 = every frame once per epoch.
+    repeat_factor_threshold: float = 0.0
     band: BandParams = field(default_factory=BandParams)
     model: DetectorParams = field(default_factory=DetectorParams)
     thresholds: Thresholds = field(default_factory=Thresholds)

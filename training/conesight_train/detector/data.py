@@ -183,6 +183,15 @@ class RendererFrames:
     def __len__(self) -> int:
         return len(self.items)
 
+    def frame_classes(self, index: int) -> np.ndarray:
+        """The classes of a frame's trainable cones, from its label file alone."""
+        _, label_path = self.items[index]
+        if label_path.suffix == ".json":
+            _, classes, _, difficult, _ = read_json_labels(label_path)
+            return classes[~difficult]
+        # YOLO boxes are normalised: the image size does not change their classes.
+        return np.array([b.class_id for b in read_yolo_txt(label_path, 1, 1)], np.int64)
+
     def __getitem__(self, index: int) -> LabelledFrame:
         image_path, label_path = self.items[index]
         image = read_rgb(image_path)

@@ -172,6 +172,10 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--png", type=Path, help="folder for annotated frames")
     parser.add_argument("--png-count", type=int, default=1000)
     parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument(
+        "--score-sweep",
+        help="comma-separated score thresholds: precision, recall and F1 at each (working range)",
+    )
     args = parser.parse_args(argv)
     torch.set_num_threads(args.threads)
     if args.checkpoint:
@@ -191,6 +195,15 @@ def main(argv: list[str] | None = None) -> None:
             f"all ranges: mAP@0.5 {every['map50']:.3f}  precision {every['precision']:.3f}  "
             f"recall {every['recall']:.3f}"
         )
+        if args.score_sweep:
+            sweep = {}
+            for t in (float(v) for v in args.score_sweep.split(",")):
+                m = evaluate(results, CLASS_NAMES, t)
+                p, r = float(m["precision"]), float(m["recall"])  # type: ignore[arg-type]
+                f1 = 2 * p * r / (p + r) if p + r > 0 else 0.0
+                sweep[f"{t:g}"] = {"precision": p, "recall": r, "f1": f1}
+                print(f"  score >= {t:g}: precision {p:.3f}  recall {r:.3f}  F1 {f1:.3f}")
+            report["score_sweep"] = sweep
     else:
         frames = unlabelled_frames(args.images, args.band_top)[: args.limit]
         results = run_frames(frames, runner, band, thresholds, args.png, args.png_count)

@@ -50,6 +50,11 @@ class DetectorParams:
     stage_channels: tuple[int, int, int, int] = (24, 48, 64, 96)  # strides 4, 8, 16, 32
     stage_blocks: tuple[int, int, int, int] = (1, 2, 2, 2)
     neck_channels: int = 32
+    # Rows as a feature: (y, y^2) of each stride-4 cell, through a 1x1 conv, added to the
+    # finest features before the heads. The band starts a fixed distance above the horizon, so
+    # the row says how far a cone standing there is and so how tall it should be: the cue
+    # that tells a large orange cone from a near small one.
+    row_features: bool = False
 
     def to_dict(self) -> dict[str, object]:
         """Keyword arguments that rebuild these params (for checkpoints and cards)."""
@@ -67,6 +72,7 @@ class DetectorParams:
             stage_channels=tuple(d["stage_channels"]),  # type: ignore[arg-type]
             stage_blocks=tuple(d["stage_blocks"]),  # type: ignore[arg-type]
             neck_channels=int(d["neck_channels"]),  # type: ignore[arg-type]
+            row_features=bool(d.get("row_features", False)),
         )
 
 
@@ -130,6 +136,7 @@ class ConeDetector(nn.Module):
         self.smooth16 = SeparableBlock(d, d)
         self.smooth8 = SeparableBlock(d, d)
         self.smooth4 = SeparableBlock(d, d)
+        self.row_embed = nn.Conv2d(2, d, 1) if p.row_features else None
         self.heat_head = _separable_head(d, p.class_count)
         self.reg_head = _separable_head(d, 4)
         init_weights(self)
@@ -153,6 +160,11 @@ class ConeDetector(nn.Module):
         p16 = self.smooth16(F.interpolate(self.lat32(f32), scale_factor=2.0) + self.lat16(f16))
         p8 = self.smooth8(F.interpolate(p16, scale_factor=2.0) + self.lat8(f8))
         p4 = self.smooth4(F.interpolate(p8, scale_factor=2.0) + self.lat4(f4))
+        if self.row_embed is not None:
+            h = p4.shape[2]
+            y = (torch.arange(h, dtype=p4.dtype, device=p4.device) + 0.5) / h
+            rows = torch.stack([y, y * y]).view(1, 2, h, 1).expand(p4.shape[0], 2, h, p4.shape[3])
+            p4 = p4 + self.row_embed(rows)
         return self.heat_head(p4), self.reg_head(p4)
 
 

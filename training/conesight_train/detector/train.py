@@ -29,6 +29,12 @@ from conesight_train.detector.loss import detector_loss
 from conesight_train.detector.metrics import evaluate
 from conesight_train.detector.model import CLASS_NAMES, ConeDetector, DetectorParams
 from conesight_train.detector.predict import predict_frames
+from conesight_train.detector.sampling import (
+    class_frame_fractions,
+    epoch_order,
+    frame_classes,
+    repeat_factors,
+)
 from conesight_train.seed import seed_everything
 
 CHECKPOINT_FORMAT = "conesight-detector-v1"
@@ -96,6 +102,16 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True) -> d
     )
     if len(dataset) == 0:
         raise ValueError(f"{config.train}: no training frames")
+    factors = np.ones(len(dataset))
+    if config.repeat_factor_threshold > 0:
+        class_sets = [frame_classes(dataset.source, i) for i in range(len(dataset))]
+        factors = repeat_factors(class_sets, len(CLASS_NAMES), config.repeat_factor_threshold)
+        fractions = class_frame_fractions(class_sets, len(CLASS_NAMES))
+        tqdm.write(
+            "repeat-factor sampling: frames per class "
+            + ", ".join(f"{n} {f:.2f}" for n, f in zip(CLASS_NAMES, fractions, strict=True))
+            + f"; mean factor {factors.mean():.2f}, max {factors.max():.2f}"
+        )
     # Full batches only (a last short batch would skew batch norm), unless the set is tiny.
     drop_last = len(dataset) >= config.batch_size
     per_epoch = len(dataset) // config.batch_size if drop_last else 1
@@ -104,11 +120,9 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True) -> d
     while step < config.steps:
         epoch, batch_in_epoch = divmod(step, per_epoch)
         dataset.set_epoch(epoch)
-        order = torch.randperm(
-            len(dataset), generator=torch.Generator().manual_seed(config.seed * 100003 + epoch)
-        )
+        order = epoch_order(factors, config.seed, epoch)
         loader = torch.utils.data.DataLoader(
-            torch.utils.data.Subset(dataset, order[batch_in_epoch * config.batch_size :].tolist()),
+            torch.utils.data.Subset(dataset, order[batch_in_epoch * config.batch_size :]),
             batch_size=config.batch_size,
             num_workers=config.workers,
             drop_last=drop_last,
@@ -172,6 +186,7 @@ def parse_args(argv: list[str] | None) -> tuple[TrainConfig, bool]:
     parser.add_argument("--threads", type=int)
     parser.add_argument("--workers", type=int)
     parser.add_argument("--val-every", type=int)
+    parser.add_argument("--repeat-factor-threshold", type=float)
     parser.add_argument("--band-input", help="WxH of the network input, e.g. 960x384")
     parser.add_argument("--band-top", type=int, help="first frame row of the band")
     parser.add_argument("--resume", action="store_true")
@@ -188,6 +203,7 @@ def parse_args(argv: list[str] | None) -> tuple[TrainConfig, bool]:
         "threads",
         "workers",
         "val_every",
+        "repeat_factor_threshold",
     ):
         value = getattr(args, name)
         if value is not None:
