@@ -1,5 +1,7 @@
 //! `conesight keypoints`: the keypoint network on cone crops (one cone per image, any size),
-//! one JSON line each with the 7 keypoints in the crop's own pixels.
+//! one JSON line each with the 7 keypoints in the crop's own pixels, their confidences in
+//! [0, 1] (`conesight_proto::confidence_from_weight`: 0.5 at 1 px of predicted noise) and the
+//! predicted noise itself (`sigma_px`).
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -9,6 +11,7 @@ use conesight_pipeline::KeypointStage;
 use conesight_pipeline::keypoint_stage::REFERENCE_SIGMA_PX;
 use conesight_pipeline::models::locate_keypoint_model;
 use conesight_pipeline::source::read_image;
+use conesight_proto::confidence_from_weight;
 use conesight_vision::PixelBox;
 use serde_json::json;
 
@@ -32,6 +35,7 @@ pub fn run(args: &KeypointsArgs) -> anyhow::Result<()> {
     let onnx = ModelOptions {
         library: args.onnxruntime.clone(),
         intra_threads: None,
+        allow_spinning: None,
     };
     let mut stage = KeypointStage::load(&path, &onnx)?;
     let stdout = std::io::stdout();
@@ -56,7 +60,7 @@ pub fn run(args: &KeypointsArgs) -> anyhow::Result<()> {
             Ok(cone) => json!({
                 "image": image_path.display().to_string(),
                 "keypoints_px": cone.keypoints_px.iter().map(|p| [p.x, p.y]).collect::<Vec<_>>(),
-                "confidence": cone.weights(REFERENCE_SIGMA_PX),
+                "confidence": cone.weights(REFERENCE_SIGMA_PX).map(confidence_from_weight),
                 "sigma_px": cone.sigma_px,
             }),
             Err(error) => {

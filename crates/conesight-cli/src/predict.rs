@@ -10,6 +10,7 @@ use conesight_onnx::ModelOptions;
 use conesight_pipeline::boxes::read_boxes;
 use conesight_pipeline::source::read_image;
 use conesight_pipeline::{FrameResult, InProcessPipeline, PipelineConfig};
+use conesight_proto::confidence_from_weight;
 use nalgebra::Matrix3;
 use serde_json::{Value, json};
 
@@ -24,7 +25,8 @@ pub struct PredictArgs {
     #[arg(long)]
     extrinsics: Option<PathBuf>,
     /// Given boxes instead of the detector's: a file (used for every image) or a folder of
-    /// `<image stem>.txt` files; YOLO txt (class ids 0 blue, 1 yellow, 2 orange,
+    /// `<image stem>.txt` files; YOLO txt (class ids by the `names` of a `data.yaml` beside
+    /// the labels or one folder up, e.g. FSOCO's; else 0 blue, 1 yellow, 2 orange,
     /// 3 large_orange) or KITTI label lines with FSOCO class names.
     #[arg(long)]
     boxes: Option<PathBuf>,
@@ -64,6 +66,7 @@ pub fn run(args: &PredictArgs) -> anyhow::Result<()> {
         onnx: ModelOptions {
             library: args.onnxruntime.clone(),
             intra_threads: args.onnx_threads,
+            allow_spinning: None,
         },
         on_ground_plane: args.ground_plane,
     };
@@ -134,7 +137,7 @@ pub fn cones_json(result: &FrameResult, with_vehicle: bool) -> Vec<Value> {
                 "score": cone.detection.score,
                 "bbox_px": [b.x_min_px, b.y_min_px, b.x_max_px, b.y_max_px],
                 "keypoints_px": cone.observation.keypoints_px.iter().map(|p| [p.x, p.y]).collect::<Vec<_>>(),
-                "confidence": cone.observation.weights,
+                "confidence": cone.observation.weights.map(confidence_from_weight),
             });
             let located = result.cones.iter().find(|(i, _)| *i == index).map(|(_, c)| c);
             if let Some(located) = located {

@@ -1,7 +1,10 @@
 //! Given boxes instead of the detector's, so keypoints + PnP can be judged alone
 //! (`conesight predict --boxes FILE`). One box per line, two formats, told apart per line:
 //!
-//! - YOLO txt: `CLASS_ID CX CY W H [SCORE]`, normalised to the image size (0..1), class ids in
+//! - YOLO txt: `CLASS_ID CX CY W H [SCORE]`, normalised to the image size (0..1). Class ids
+//!   follow the `names` of the data set's Ultralytics `data.yaml` when one sits beside the
+//!   labels file or one folder up (FSOCO's exports list `blue_cone, large_orange_cone,
+//!   orange_cone, unknown_cone, yellow_cone`; `unknown_cone` boxes are skipped); without one,
 //!   conesight's order: 0 blue, 1 yellow, 2 orange, 3 large_orange.
 //! - KITTI labels: `TYPE TRUNCATED OCCLUDED ALPHA X1 Y1 X2 Y2 ...` with the box in pixels and
 //!   the type a conesight or FSOCO class name (`blue_cone`, `yellow_cone`, `orange_cone`,
@@ -10,7 +13,7 @@
 //! Blank lines and lines starting with `#` are ignored. Boxes come back as edges in the
 //! OpenCV pixel convention (the image covers `[-0.5, W - 0.5)`).
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use conesight_core::ConeClass;
 use conesight_proto::ConeDetection;
@@ -21,7 +24,86 @@ use crate::error::PipelineError;
 /// Class names skipped in KITTI files (FSOCO's cones of unknown colour).
 pub const SKIPPED_CLASSES: [&str; 2] = ["unknown_cone", "unknown"];
 
-/// Parses a boxes file for an image of `width_px` x `height_px`.
+/// The classes of a YOLO data set's ids (`None`: a skipped class such as `unknown_cone`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct YoloClasses {
+    /// The `data.yaml` they came from.
+    pub source: PathBuf,
+    /// Class of each id.
+    pub classes: Vec<Option<ConeClass>>,
+}
+
+impl YoloClasses {
+    /// Reads the `names` of an Ultralytics `data.yaml` (a list, or a map from id to name).
+    pub fn from_data_yaml(path: &Path) -> Result<Self, PipelineError> {
+        let error = |reason: String| PipelineError::Boxes {
+            path: path.to_path_buf(),
+            line: 0,
+            reason,
+        };
+        let text = std::fs::read_to_string(path).map_err(|e| error(e.to_string()))?;
+        Self::parse(&text, path).map_err(error)
+    }
+
+    fn parse(text: &str, path: &Path) -> Result<Self, String> {
+        let hint =
+            "expected `names: [blue_cone, yellow_cone, ...]` or `names: {0: blue_cone, ...}`";
+        let yaml: serde_yaml::Value =
+            serde_yaml::from_str(text).map_err(|e| format!("not YAML ({e}); {hint}"))?;
+        let names: Vec<String> = match yaml.get("names") {
+            Some(serde_yaml::Value::Sequence(items)) => items
+                .iter()
+                .map(|v| v.as_str().map(str::to_owned))
+                .collect::<Option<_>>()
+                .ok_or_else(|| format!("a name is not a string; {hint}"))?,
+            Some(serde_yaml::Value::Mapping(map)) => {
+                let mut pairs = map
+                    .iter()
+                    .map(|(k, v)| Some((k.as_u64()?, v.as_str()?.to_owned())))
+                    .collect::<Option<Vec<_>>>()
+                    .ok_or_else(|| format!("names must map ids to strings; {hint}"))?;
+                pairs.sort();
+                if pairs.iter().enumerate().any(|(i, (id, _))| *id != i as u64) {
+                    return Err(format!("names ids are not 0, 1, 2, ...; {hint}"));
+                }
+                pairs.into_iter().map(|(_, name)| name).collect()
+            }
+            _ => return Err(format!("no `names`; {hint}")),
+        };
+        let classes = names
+            .iter()
+            .map(|name| {
+                let name = name.to_ascii_lowercase();
+                if SKIPPED_CLASSES.contains(&name.as_str()) {
+                    Ok(None)
+                } else {
+                    name.parse::<ConeClass>()
+                        .map(Some)
+                        .map_err(|e| format!("{e}"))
+                }
+            })
+            .collect::<Result<_, String>>()?;
+        Ok(Self {
+            source: path.to_path_buf(),
+            classes,
+        })
+    }
+
+    /// The `data.yaml` beside `labels_file` or one folder up, when there is one.
+    pub fn find_for(labels_file: &Path) -> Result<Option<Self>, PipelineError> {
+        let folder = labels_file.parent().unwrap_or(Path::new("."));
+        for dir in [Some(folder), folder.parent()].into_iter().flatten() {
+            let candidate = dir.join("data.yaml");
+            if candidate.is_file() {
+                return Self::from_data_yaml(&candidate).map(Some);
+            }
+        }
+        Ok(None)
+    }
+}
+
+/// Parses a boxes file for an image of `width_px` x `height_px` (YOLO ids mapped by the
+/// data set's `data.yaml` when there is one, see the module docs).
 pub fn read_boxes(
     path: &Path,
     width_px: u32,
@@ -32,18 +114,32 @@ pub fn read_boxes(
         line: 0,
         reason: e.to_string(),
     })?;
-    parse_boxes(&text, width_px, height_px).map_err(|(line, reason)| PipelineError::Boxes {
-        path: path.to_path_buf(),
-        line,
-        reason,
+    let names = YoloClasses::find_for(path)?;
+    parse_boxes_with(&text, width_px, height_px, names.as_ref()).map_err(|(line, reason)| {
+        PipelineError::Boxes {
+            path: path.to_path_buf(),
+            line,
+            reason,
+        }
     })
 }
 
-/// Parses boxes text; errors carry the 1-based line number and the reason.
+/// Parses boxes text with YOLO ids in conesight's order; errors carry the 1-based line
+/// number and the reason.
 pub fn parse_boxes(
     text: &str,
     width_px: u32,
     height_px: u32,
+) -> Result<Vec<ConeDetection>, (usize, String)> {
+    parse_boxes_with(text, width_px, height_px, None)
+}
+
+/// [`parse_boxes`] with the YOLO ids of `names` (conesight's order when `None`).
+pub fn parse_boxes_with(
+    text: &str,
+    width_px: u32,
+    height_px: u32,
+    names: Option<&YoloClasses>,
 ) -> Result<Vec<ConeDetection>, (usize, String)> {
     let mut detections = Vec::new();
     for (number, line) in text.lines().enumerate() {
@@ -53,7 +149,7 @@ pub fn parse_boxes(
         }
         let fields: Vec<&str> = line.split_whitespace().collect();
         let parsed = if fields[0].parse::<u32>().is_ok() {
-            yolo_line(&fields, width_px, height_px)
+            yolo_line(&fields, width_px, height_px, names)
         } else {
             kitti_line(&fields)
         };
@@ -109,13 +205,30 @@ fn yolo_line(
     fields: &[&str],
     width_px: u32,
     height_px: u32,
+    names: Option<&YoloClasses>,
 ) -> Result<Option<ConeDetection>, String> {
     let class_id: usize = fields[0]
         .parse()
         .map_err(|_| format!("class id {:?} is not a number", fields[0]))?;
-    let class = *ConeClass::ALL.get(class_id).ok_or_else(|| {
-        format!("YOLO class id {class_id} is not 0 blue, 1 yellow, 2 orange or 3 large_orange")
-    })?;
+    let class = match names {
+        None => *ConeClass::ALL.get(class_id).ok_or_else(|| {
+            format!(
+                "YOLO class id {class_id} is not 0 blue, 1 yellow, 2 orange or 3 large_orange \
+                 (put the data set's data.yaml with its `names` beside the labels for another order)"
+            )
+        })?,
+        Some(names) => match names.classes.get(class_id) {
+            Some(Some(class)) => *class,
+            Some(None) => return Ok(None),
+            None => {
+                return Err(format!(
+                    "YOLO class id {class_id} is not in the {} names of {}",
+                    names.classes.len(),
+                    names.source.display()
+                ));
+            }
+        },
+    };
     let (cx, cy) = (number(fields, 1, "cx")?, number(fields, 2, "cy")?);
     let (w, h) = (number(fields, 3, "w")?, number(fields, 4, "h")?);
     if fields.len() > 6 {
@@ -180,6 +293,70 @@ pub fn kitti_line_of(detection: &ConeDetection) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn fsoco_data_yaml_maps_yolo_ids_and_skips_unknown_cones() {
+        let fsoco = "names:\n  - blue_cone\n  - large_orange_cone\n  - orange_cone\n  - unknown_cone\n  - yellow_cone\nnc: 5\n";
+        let names = YoloClasses::parse(fsoco, Path::new("data.yaml")).unwrap();
+        let text = "0 0.5 0.5 0.1 0.2\n1 0.5 0.5 0.1 0.2\n3 0.5 0.5 0.1 0.2\n4 0.5 0.5 0.1 0.2\n";
+        let boxes = parse_boxes_with(text, 100, 50, Some(&names)).unwrap();
+        let classes: Vec<ConeClass> = boxes.iter().map(|b| b.class).collect();
+        assert_eq!(
+            classes,
+            [ConeClass::Blue, ConeClass::LargeOrange, ConeClass::Yellow]
+        );
+        let (line, reason) =
+            parse_boxes_with("5 0.5 0.5 0.1 0.2", 100, 50, Some(&names)).unwrap_err();
+        assert_eq!(line, 1);
+        assert!(
+            reason.contains("not in the 5 names of data.yaml"),
+            "{reason}"
+        );
+        // The map form, and conesight's own names.
+        let map = YoloClasses::parse("names: {1: yellow, 0: blue}", Path::new("d.yaml")).unwrap();
+        assert_eq!(
+            map.classes,
+            [Some(ConeClass::Blue), Some(ConeClass::Yellow)]
+        );
+        for bad in [
+            "names: 3",
+            "names: [blue, purple_cone]",
+            "names: {0: blue, 2: yellow}",
+            ": :",
+        ] {
+            assert!(
+                YoloClasses::parse(bad, Path::new("d.yaml")).is_err(),
+                "{bad}"
+            );
+        }
+    }
+
+    #[test]
+    fn data_yaml_is_found_beside_the_labels_or_one_folder_up() {
+        let root = std::env::temp_dir().join(format!("conesight-yolo-{}", std::process::id()));
+        let labels = root.join("labels");
+        std::fs::create_dir_all(&labels).unwrap();
+        let file = labels.join("000000.txt");
+        std::fs::write(&file, "1 0.5 0.5 0.1 0.2\n").unwrap();
+        // No data.yaml: conesight's order (1 = yellow).
+        assert_eq!(
+            read_boxes(&file, 100, 50).unwrap()[0].class,
+            ConeClass::Yellow
+        );
+        std::fs::write(
+            root.join("data.yaml"),
+            "names: [blue_cone, large_orange_cone]\n",
+        )
+        .unwrap();
+        assert_eq!(
+            read_boxes(&file, 100, 50).unwrap()[0].class,
+            ConeClass::LargeOrange
+        );
+        std::fs::write(root.join("data.yaml"), "names: 7\n").unwrap();
+        let error = read_boxes(&file, 100, 50).unwrap_err().to_string();
+        assert!(error.contains("data.yaml"), "{error}");
+        let _ = std::fs::remove_dir_all(&root);
+    }
 
     #[test]
     fn yolo_and_kitti_lines() {

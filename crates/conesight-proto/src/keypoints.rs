@@ -9,6 +9,31 @@ use crate::error::ProtoError;
 use crate::pb;
 use crate::validate::{each, finite, in_range, present};
 
+/// Largest PnP weight a confidence of 1 decodes to (a keypoint trusted 10^6 times more than one
+/// with the reference noise).
+pub const MAX_KEYPOINT_WEIGHT: f64 = 1e6;
+
+/// A keypoint's confidence in [0, 1) from its PnP weight `w = (reference sigma / sigma)^2`:
+/// `c = w / (1 + w)`, so a keypoint with the reference noise has confidence 0.5, a sharper one
+/// more, a blurrier one less, an ignored one (weight 0) none. This is what the wire and the
+/// JSON outputs carry; [`weight_from_confidence`] is its inverse.
+#[must_use]
+pub fn confidence_from_weight(weight: f64) -> f64 {
+    if weight.is_finite() {
+        weight.max(0.0) / (1.0 + weight.max(0.0))
+    } else {
+        1.0
+    }
+}
+
+/// The PnP weight of a confidence in [0, 1]: `w = c / (1 - c)`, at most
+/// [`MAX_KEYPOINT_WEIGHT`].
+#[must_use]
+pub fn weight_from_confidence(confidence: f64) -> f64 {
+    let c = confidence.clamp(0.0, 1.0);
+    (c / (1.0 - c)).min(MAX_KEYPOINT_WEIGHT)
+}
+
 /// The 7 keypoints regressed on one detection.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ConeKeypoints {
@@ -30,7 +55,7 @@ impl From<&ConeKeypoints> for pb::ConeKeypoints {
                 .map(|(point, weight)| pb::Keypoint {
                     u_px: point.x,
                     v_px: point.y,
-                    confidence: *weight,
+                    confidence: confidence_from_weight(*weight),
                 })
                 .collect(),
         }
@@ -41,7 +66,7 @@ impl TryFrom<&pb::ConeKeypoints> for ConeKeypoints {
     type Error = ProtoError;
 
     /// Checks the detection, that there are exactly [`KEYPOINT_COUNT`] keypoints, finite
-    /// coordinates and finite non-negative confidences.
+    /// coordinates and confidences in [0, 1] (decoded to PnP weights).
     fn try_from(k: &pb::ConeKeypoints) -> Result<Self, ProtoError> {
         let detection = ConeDetection::try_from(present("detection", &k.detection)?)
             .map_err(|e| e.within("detection"))?;
@@ -59,8 +84,8 @@ impl TryFrom<&pb::ConeKeypoints> for ConeKeypoints {
                     finite("u_px", keypoint.u_px)?,
                     finite("v_px", keypoint.v_px)?,
                 );
-                let weight = in_range("confidence", keypoint.confidence, 0.0, f64::MAX)?;
-                Ok((point, weight))
+                let confidence = in_range("confidence", keypoint.confidence, 0.0, 1.0)?;
+                Ok((point, weight_from_confidence(confidence)))
             };
             let (point, weight) = checked().map_err(|e| e.in_item("keypoints", index))?;
             observation.keypoints_px[index] = point;
@@ -116,6 +141,19 @@ mod tests {
     }
 
     #[test]
+    fn confidences_are_in_the_unit_interval_and_invert_to_weights() {
+        for weight in [0.0, 0.01, 0.5, 1.0, 7.3, 1e4] {
+            let c = confidence_from_weight(weight);
+            assert!((0.0..1.0).contains(&c), "{weight} -> {c}");
+            assert!((weight_from_confidence(c) - weight).abs() <= 1e-9 * weight.max(1.0));
+        }
+        assert_eq!(confidence_from_weight(1.0), 0.5);
+        assert_eq!(confidence_from_weight(f64::INFINITY), 1.0);
+        assert_eq!(weight_from_confidence(1.0), MAX_KEYPOINT_WEIGHT);
+        assert!(confidence_from_weight(4.0) > confidence_from_weight(1.0));
+    }
+
+    #[test]
     fn wrong_count_and_bad_values_are_named() {
         let header = pb::Header::new("front", 0, 0, "front_optical");
         let mut message = pb::Keypoints::new(header, &[keypoints()]);
@@ -129,6 +167,8 @@ mod tests {
         );
         message.cones[0].keypoints[5].v_px = 1.0;
         message.cones[0].keypoints[2].confidence = -0.1;
+        assert_eq!(message.to_core().unwrap_err().kind(), "out_of_range");
+        message.cones[0].keypoints[2].confidence = 1.5;
         assert_eq!(message.to_core().unwrap_err().kind(), "out_of_range");
         message.cones[0].keypoints.pop();
         assert!(matches!(

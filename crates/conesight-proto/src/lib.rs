@@ -36,7 +36,9 @@ pub use cone::LocatedCone;
 pub use detection::ConeDetection;
 pub use error::ProtoError;
 pub use header::{is_valid_camera_id, now_ns, peek_header, require_header};
-pub use keypoints::ConeKeypoints;
+pub use keypoints::{
+    ConeKeypoints, MAX_KEYPOINT_WEIGHT, confidence_from_weight, weight_from_confidence,
+};
 
 /// Types generated from `proto/conesight/v1` (package `conesight.v1`); field docs there.
 #[allow(missing_docs, clippy::all, clippy::pedantic)]

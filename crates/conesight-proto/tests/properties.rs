@@ -110,7 +110,16 @@ proptest! {
     #[test]
     fn keypoints_round_trip(header in header(), items in prop::collection::vec(keypoints(), 0..10)) {
         let message = through_bytes(&pb::Keypoints::new(header, &items)).unwrap();
-        prop_assert_eq!(message.to_core().unwrap(), items);
+        let back = message.to_core().unwrap();
+        prop_assert_eq!(back.len(), items.len());
+        for (back, item) in back.iter().zip(&items) {
+            prop_assert_eq!(back.detection, item.detection);
+            prop_assert_eq!(back.observation.keypoints_px, item.observation.keypoints_px);
+            // Weights travel as confidences w / (1 + w): equal to rounding.
+            for (b, w) in back.observation.weights.iter().zip(&item.observation.weights) {
+                prop_assert!((b - w).abs() <= 1e-9 * w.max(1.0), "{} vs {}", b, w);
+            }
+        }
     }
 
     #[test]
