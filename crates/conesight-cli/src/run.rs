@@ -19,6 +19,7 @@ use conesight_pipeline::node::{CommonArgs, MAX_INPUT_AGE};
 use conesight_pipeline::stats::{fmt_opt, median, percentile};
 use conesight_pipeline::{Node, Shutdown, locate_detector, match_cones};
 use conesight_proto::{ConeKeypoints, LocatedCone, now_ns, pb};
+use conesight_service::Readiness;
 use conesight_sim::frames::Layout;
 use image::Rgb;
 
@@ -90,6 +91,9 @@ pub struct RunArgs {
     /// ONNX Runtime threads per model.
     #[arg(long = "onnx-threads")]
     onnx_threads: Option<usize>,
+    /// Whether ONNX Runtime's idle threads busy-wait between calls (default: ONNX Runtime's).
+    #[arg(long = "onnx-spinning")]
+    onnx_spinning: Option<bool>,
     /// Constrain cone bases to the road plane.
     #[arg(long = "ground-plane")]
     ground_plane: bool,
@@ -180,7 +184,9 @@ async fn run_async(args: RunArgs) -> anyhow::Result<()> {
             nodes.push(start_node(name, label, Some(MAX_INPUT_AGE)));
         }
     }
+    let mut readiness = Vec::new();
     for (name, node) in nodes {
+        readiness.push(node.readiness.clone());
         if args.http_base_port.is_some() {
             let addr = node.serve_http(common(name).http.addr, &shutdown).await?;
             println!("{name:?}: http://{addr}/metrics");
@@ -191,6 +197,7 @@ async fn run_async(args: RunArgs) -> anyhow::Result<()> {
                 let mut service = DetectorArgs::new(common(name));
                 service.model = Some(detector_path.clone());
                 service.onnx_threads = args.onnx_threads;
+                service.onnx_spinning = args.onnx_spinning;
                 tokio::spawn(async move {
                     conesight_detector_service::run(&service, node, shutdown).await
                 })
@@ -199,6 +206,7 @@ async fn run_async(args: RunArgs) -> anyhow::Result<()> {
                 let mut service = KeypointsArgs::new(common(name));
                 service.model = args.keypoint_model.clone();
                 service.onnx_threads = args.onnx_threads;
+                service.onnx_spinning = args.onnx_spinning;
                 tokio::spawn(async move {
                     conesight_keypoints_service::run(&service, node, shutdown).await
                 })
@@ -225,8 +233,8 @@ async fn run_async(args: RunArgs) -> anyhow::Result<()> {
                 .await?;
             println!("camera: http://{addr}/metrics");
         }
-        // Give the other services a moment to load their models and declare subscribers.
-        wait_until_loaded(&tasks, Duration::from_secs(20)).await;
+        // Frames published before the other services listen would be lost: wait for them.
+        wait_until_loaded(&tasks, &readiness, Duration::from_secs(20)).await;
         let shutdown = shutdown.clone();
         let done = camera_done.clone();
         tasks.push((
@@ -262,19 +270,24 @@ async fn run_async(args: RunArgs) -> anyhow::Result<()> {
     summary.finish(&args, preloaded.as_deref())
 }
 
-/// Waits until the model-loading services are past their start-up (a fixed pause capped by
-/// `limit`, ended early when one of them has already failed).
-async fn wait_until_loaded(tasks: &[(ServiceName, Task)], limit: Duration) {
+/// Waits until every started service has loaded its model and declared its subscribers (its
+/// readiness says `model_loaded`), at most `limit`; returns early when one of them has already
+/// stopped (it failed: the caller reports it).
+async fn wait_until_loaded(
+    tasks: &[(ServiceName, Task)],
+    readiness: &[Arc<Readiness>],
+    limit: Duration,
+) {
     let started = Instant::now();
-    // Loading ONNX Runtime and both models takes about a second; declarations propagate
-    // within the process at once.
-    let pause = Duration::from_millis(1500).min(limit);
-    while started.elapsed() < pause {
-        if tasks.iter().any(|(_, task)| task.is_finished()) {
+    while started.elapsed() < limit {
+        if tasks.iter().any(|(_, task)| task.is_finished())
+            || readiness.iter().all(|r| r.report().model_loaded)
+        {
             return;
         }
-        tokio::time::sleep(Duration::from_millis(50)).await;
+        tokio::time::sleep(Duration::from_millis(10)).await;
     }
+    tracing::warn!("services still loading after {limit:?}; starting the camera anyway");
 }
 
 /// One frame's outcome as seen on the `cones` stream.

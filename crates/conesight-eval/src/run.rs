@@ -165,6 +165,7 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Meta> {
     let onnx = ModelOptions {
         library: None,
         intra_threads: config.threads,
+        allow_spinning: None,
     };
     let params = FrameParams::default();
     let camera = params.camera;

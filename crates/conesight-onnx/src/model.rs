@@ -16,6 +16,10 @@ pub struct ModelOptions {
     pub library: Option<PathBuf>,
     /// Intra-op threads; `None` lets ONNX Runtime decide (all cores).
     pub intra_threads: Option<usize>,
+    /// Whether idle intra-op threads spin (busy-wait) for the next call; `None` keeps ONNX
+    /// Runtime's default (spinning). Services sharing two cores turn it off, so one model's
+    /// idle threads do not steal the core another process is computing on.
+    pub allow_spinning: Option<bool>,
 }
 
 /// A dense `f32` tensor: shape and row-major data.
@@ -63,6 +67,13 @@ impl OnnxModel {
         if let Some(threads) = options.intra_threads {
             builder = builder
                 .with_intra_threads(threads)
+                .map_err(|e| load_error(e.into()))?;
+        }
+        if let Some(spinning) = options.allow_spinning {
+            builder = builder
+                .with_intra_op_spinning(spinning)
+                .map_err(|e| load_error(e.into()))?
+                .with_inter_op_spinning(spinning)
                 .map_err(|e| load_error(e.into()))?;
         }
         let session = builder.commit_from_file(path).map_err(load_error)?;

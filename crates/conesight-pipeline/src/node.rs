@@ -183,12 +183,15 @@ impl Node {
     }
 
     /// Decodes a sample as `M` (at most `limit` bytes); on failure counts and logs the error
-    /// by kind and returns `None`.
+    /// by kind and returns `None`. Counts samples that arrived in shared memory.
     pub fn decode<M: conesight_proto::Message + Default>(
         &self,
         sample: &Sample,
         limit: usize,
     ) -> Option<M> {
+        if sample.payload().as_shm().is_some() {
+            self.metrics.shared_memory_message();
+        }
         match decode_with_limit::<M>(sample.payload(), limit) {
             Ok(message) => Some(message),
             Err(error) => {

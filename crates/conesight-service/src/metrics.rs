@@ -45,6 +45,7 @@ pub struct Metrics {
     frames_received: Counter,
     frames_processed: Counter,
     frames_dropped: Counter,
+    shared_memory_messages: Counter,
     errors: Family<OneLabel, Counter>,
     stage_latency: Family<OneLabel, Histogram, fn() -> Histogram>,
     queue_depth: Gauge,
@@ -63,6 +64,7 @@ impl Metrics {
         let frames_received = Counter::default();
         let frames_processed = Counter::default();
         let frames_dropped = Counter::default();
+        let shared_memory_messages = Counter::default();
         let errors = Family::<OneLabel, Counter>::default();
         let stage_latency = Family::<OneLabel, Histogram, fn() -> Histogram>::new_with_constructor(
             latency_histogram,
@@ -83,6 +85,11 @@ impl Metrics {
             "Inputs dropped unprocessed (replaced by a newer one or rejected)",
             frames_dropped.clone(),
         );
+        registry.register(
+            "shared_memory_messages",
+            "Input messages that arrived in Zenoh shared memory (zero-copy, same host)",
+            shared_memory_messages.clone(),
+        );
         registry.register("errors", "Errors by kind", errors.clone());
         registry.register(
             "stage_latency_seconds",
@@ -99,6 +106,7 @@ impl Metrics {
             frames_received,
             frames_processed,
             frames_dropped,
+            shared_memory_messages,
             errors,
             stage_latency,
             queue_depth,
@@ -118,6 +126,16 @@ impl Metrics {
     /// Counts one input dropped.
     pub fn frame_dropped(&self) {
         self.frames_dropped.inc();
+    }
+
+    /// Counts one input that arrived in shared memory.
+    pub fn shared_memory_message(&self) {
+        self.shared_memory_messages.inc();
+    }
+
+    /// Input messages that arrived in shared memory so far.
+    pub fn shared_memory_message_count(&self) -> u64 {
+        self.shared_memory_messages.get()
     }
 
     /// Counts one error of `kind` (a short stable name such as `malformed_protobuf`).
@@ -162,6 +180,7 @@ mod tests {
         metrics.frame_received();
         metrics.frame_processed();
         metrics.frame_dropped();
+        metrics.shared_memory_message();
         metrics.error("malformed_protobuf");
         metrics.observe_stage("inference", Duration::from_millis(3));
         metrics.set_queue_depth(1);
@@ -170,6 +189,7 @@ mod tests {
             "conesight_frames_received_total 2",
             "conesight_frames_processed_total 1",
             "conesight_frames_dropped_total 1",
+            "conesight_shared_memory_messages_total 1",
             "conesight_errors_total{kind=\"malformed_protobuf\"} 1",
             "conesight_stage_latency_seconds_count{stage=\"inference\"} 1",
             "conesight_stage_latency_seconds_bucket{le=\"0.0016\",stage=\"inference\"} 0",
@@ -179,6 +199,7 @@ mod tests {
             assert!(text.contains(line), "missing {line:?} in\n{text}");
         }
         assert_eq!(metrics.error_count("malformed_protobuf"), 1);
+        assert_eq!(metrics.shared_memory_message_count(), 1);
         assert!(text.ends_with("# EOF\n"));
     }
 }

@@ -34,6 +34,10 @@ pub struct DetectorArgs {
     /// ONNX Runtime intra-op threads (default: ONNX Runtime's choice, every core).
     #[arg(long = "onnx-threads", env = "CONESIGHT_ONNX_THREADS")]
     pub onnx_threads: Option<usize>,
+    /// Whether ONNX Runtime's idle threads busy-wait for the next call (`true`: ONNX Runtime's
+    /// default; `false` frees the cores for the other services between frames).
+    #[arg(long = "onnx-spinning", env = "CONESIGHT_ONNX_SPINNING")]
+    pub onnx_spinning: Option<bool>,
 }
 
 impl DetectorArgs {
@@ -43,6 +47,7 @@ impl DetectorArgs {
             common,
             model: None,
             onnx_threads: None,
+            onnx_spinning: None,
         }
     }
 }
@@ -53,11 +58,11 @@ pub async fn run(args: &DetectorArgs, node: Node, shutdown: Shutdown) -> anyhow:
     let path = locate_detector(args.model.as_deref());
     let onnx = ModelOptions {
         intra_threads: args.onnx_threads,
+        allow_spinning: args.onnx_spinning,
         ..ModelOptions::default()
     };
     let mut stage =
         tokio::task::spawn_blocking(move || DetectorStage::load(&path, &onnx)).await??;
-    node.readiness.set_model_loaded(true);
     let calibration = Arc::new(CalibrationCell::default());
     follow_camera_info(&node, camera, calibration.clone(), &shutdown).await?;
     let frames = declare_subscriber(
@@ -68,6 +73,8 @@ pub async fn run(args: &DetectorArgs, node: Node, shutdown: Shutdown) -> anyhow:
     .await?;
     let publisher =
         declare_publisher(&node.session, &node.topics, camera, Stream::Detections).await?;
+    // Ready for input only now: the model is loaded and the subscribers are declared.
+    node.readiness.set_model_loaded(true);
     let limit = args.common.max_message_bytes();
     let worker_node = node.clone();
     let mut seen_calibration = 0_u64;

@@ -51,6 +51,10 @@ pub struct KeypointsArgs {
     /// ONNX Runtime intra-op threads (default: ONNX Runtime's choice, every core).
     #[arg(long = "onnx-threads", env = "CONESIGHT_ONNX_THREADS")]
     pub onnx_threads: Option<usize>,
+    /// Whether ONNX Runtime's idle threads busy-wait for the next call (`true`: ONNX Runtime's
+    /// default; `false` frees the cores for the other services between frames).
+    #[arg(long = "onnx-spinning", env = "CONESIGHT_ONNX_SPINNING")]
+    pub onnx_spinning: Option<bool>,
     /// Most cones per frame sent through the network (highest scores kept).
     #[arg(long = "max-cones", default_value_t = DEFAULT_MAX_CONES_PER_FRAME)]
     pub max_cones: usize,
@@ -66,6 +70,7 @@ impl KeypointsArgs {
             common,
             model: None,
             onnx_threads: None,
+            onnx_spinning: None,
             max_cones: DEFAULT_MAX_CONES_PER_FRAME,
             pair_cache: DEFAULT_PAIR_CACHE,
         }
@@ -78,6 +83,7 @@ pub async fn run(args: &KeypointsArgs, node: Node, shutdown: Shutdown) -> anyhow
     let path = conesight_pipeline::models::locate_keypoint_model(args.model.as_deref());
     let onnx = ModelOptions {
         intra_threads: args.onnx_threads,
+        allow_spinning: args.onnx_spinning,
         ..ModelOptions::default()
     };
     let max_cones = args.max_cones;
@@ -85,7 +91,6 @@ pub async fn run(args: &KeypointsArgs, node: Node, shutdown: Shutdown) -> anyhow
         KeypointStage::load(&path, &onnx).map(|stage| stage.with_max_cones(max_cones))
     })
     .await??;
-    node.readiness.set_model_loaded(true);
     let frames = declare_subscriber(
         &node.session,
         node.topics.key(camera, Stream::Frame)?,
@@ -100,6 +105,8 @@ pub async fn run(args: &KeypointsArgs, node: Node, shutdown: Shutdown) -> anyhow
     .await?;
     let publisher =
         declare_publisher(&node.session, &node.topics, camera, Stream::Keypoints).await?;
+    // Ready for input only now: the model is loaded and the subscribers are declared.
+    node.readiness.set_model_loaded(true);
     let limit = args.common.max_message_bytes();
     let worker_node = node.clone();
     let worker = Worker::spawn(

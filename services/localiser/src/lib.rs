@@ -59,7 +59,6 @@ pub async fn run(args: &LocaliserArgs, node: Node, shutdown: Shutdown) -> anyhow
         Some(path) => Some(Extrinsics::from_yaml_file(path)?),
         None => None,
     };
-    node.readiness.set_model_loaded(true);
     let calibration = Arc::new(CalibrationCell::default());
     follow_camera_info(&node, camera, calibration.clone(), &shutdown).await?;
     let keypoints = declare_subscriber(
@@ -69,6 +68,8 @@ pub async fn run(args: &LocaliserArgs, node: Node, shutdown: Shutdown) -> anyhow
     )
     .await?;
     let publisher = declare_publisher(&node.session, &node.topics, camera, Stream::Cones).await?;
+    // Ready for input only now: the model is loaded and the subscribers are declared.
+    node.readiness.set_model_loaded(true);
     let limit = args.common.max_message_bytes().min(KEYPOINTS_LIMIT_BYTES);
     let ground_plane = args.ground_plane;
     let worker_node = node.clone();

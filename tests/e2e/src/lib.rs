@@ -477,3 +477,22 @@ impl StreamLog {
             .unwrap_or_default()
     }
 }
+
+/// Whether this process may lock `bytes` of memory, as Zenoh's shared memory does for its
+/// pool (`mlock`): the `Max locked memory` limit allows it or the process has CAP_IPC_LOCK
+/// (root in most sandboxes; not in a default Docker container).
+pub fn memory_lockable(bytes: u64) -> bool {
+    let status = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
+    let cap_ipc_lock = status
+        .lines()
+        .find_map(|l| l.strip_prefix("CapEff:"))
+        .and_then(|hex| u64::from_str_radix(hex.trim(), 16).ok())
+        .is_some_and(|caps| caps & (1 << 14) != 0);
+    let limits = std::fs::read_to_string("/proc/self/limits").unwrap_or_default();
+    let limit_ok = limits
+        .lines()
+        .find(|l| l.starts_with("Max locked memory"))
+        .and_then(|l| l.split_whitespace().nth(3))
+        .is_some_and(|soft| soft == "unlimited" || soft.parse::<u64>().is_ok_and(|b| b >= bytes));
+    cap_ipc_lock || limit_ok
+}

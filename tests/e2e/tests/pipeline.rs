@@ -7,7 +7,7 @@
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-use conesight_e2e::{Cluster, Fixture, Observer, Received, trained_detector};
+use conesight_e2e::{Cluster, Fixture, Observer, Received, memory_lockable, trained_detector};
 use conesight_pipeline::match_cones;
 use conesight_pipeline::stats::{median, percentile};
 
@@ -16,12 +16,25 @@ const EXE: &str = env!("CARGO_BIN_EXE_conesight-e2e-services");
 /// Largest median position error relative to range. The demo measured 1.55 % on rendered
 /// frames with exact boxes (keypoint network 0.67 px on synthetic patches).
 const MAX_MEDIAN_RELATIVE_ERROR: f64 = 0.03;
+/// Smallest share of the usable true cones the pipeline must locate. The shipped detector's
+/// measured recall within 30 m is 0.88 (models/detector.md); 3 frames hold ~60 usable cones,
+/// so a sample's recall moves by several percent around it.
+const MIN_MATCHED_SHARE: f64 = 0.75;
+/// Zenoh's default shared-memory pool, which it locks in memory.
+const ZENOH_SHM_POOL_BYTES: u64 = 16 << 20;
 /// Largest 90th percentile of the relative error.
 const MAX_P90_RELATIVE_ERROR: f64 = 0.10;
 
 /// The four services reading `fixture` at `rate_hz`; boxes from the trained detector when
-/// shipped, else from the label files.
-fn cluster(fixture: &Fixture, namespace: &str, rate_hz: f64, extra_camera: &[&str]) -> Cluster {
+/// shipped, else from the label files. `extra_camera` goes to the camera, `extra_all` to every
+/// service.
+fn cluster(
+    fixture: &Fixture,
+    namespace: &str,
+    rate_hz: f64,
+    extra_camera: &[&str],
+    extra_all: &[&str],
+) -> Cluster {
     let detector = trained_detector();
     let mut camera = vec![
         "--source".to_owned(),
@@ -56,6 +69,9 @@ fn cluster(fixture: &Fixture, namespace: &str, rate_hz: f64, extra_camera: &[&st
         None => camera.push("--publish-boxes".to_owned()),
     }
     services.push(("camera", camera));
+    for (_, args) in &mut services {
+        args.extend(extra_all.iter().map(|s| (*s).to_owned()));
+    }
     Cluster::new(Path::new(EXE), namespace, &services).unwrap()
 }
 
@@ -84,7 +100,7 @@ fn errors(fixture: &Fixture, received: &[Received]) -> (Vec<f64>, usize, usize) 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn frames_in_cones_out_within_model_accuracy_then_restart_each_service() {
     let fixture = Fixture::render("e2e", 3).unwrap();
-    let mut cluster = cluster(&fixture, "e2e-main", 5.0, &[]);
+    let mut cluster = cluster(&fixture, "e2e-main", 5.0, &[], &[]);
     let observer = Observer::start(&cluster.observer_args(), "front")
         .await
         .unwrap();
@@ -108,7 +124,7 @@ async fn frames_in_cones_out_within_model_accuracy_then_restart_each_service() {
         100.0 * p90_error
     );
     assert!(
-        matched as f64 >= 0.8 * usable as f64,
+        matched as f64 >= MIN_MATCHED_SHARE * usable as f64,
         "matched {matched} of {usable}"
     );
     assert!(
@@ -120,6 +136,17 @@ async fn frames_in_cones_out_within_model_accuracy_then_restart_each_service() {
     for name in ["keypoints", "localiser", "camera"] {
         let (status, body) = cluster.http(name, "/readyz").unwrap();
         assert_eq!(status, 200, "{name}: {body}");
+    }
+
+    // Shared memory (on by default): frames reach the keypoints service, in another process on
+    // this host, in Zenoh's shared memory, not through the socket.
+    let shm = cluster.metric("keypoints", "conesight_shared_memory_messages_total");
+    let received_frames = cluster.metric("keypoints", "conesight_frames_received_total");
+    println!("keypoints: {shm} of {received_frames} input messages arrived in shared memory");
+    if memory_lockable(ZENOH_SHM_POOL_BYTES) {
+        assert!(shm > 0.0, "no frame arrived in shared memory");
+    } else {
+        println!("shared memory not checked: this process may not lock Zenoh's 16 MiB pool");
     }
 
     // Kill and restart each service in turn; the others keep running.
@@ -164,11 +191,59 @@ async fn frames_in_cones_out_within_model_accuracy_then_restart_each_service() {
     }
 }
 
+/// The cross-host configuration on one host: JPEG frames, shared memory off (every byte
+/// through the TCP socket, as between a Jetson and the main PC).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn jpeg_frames_through_the_socket_as_between_hosts() {
+    let fixture = Fixture::render("jpeg", 2).unwrap();
+    let mut cluster = cluster(
+        &fixture,
+        "e2e-jpeg",
+        5.0,
+        &["--frame-encoding", "jpeg", "--jpeg-quality", "90"],
+        &["--zenoh-shm", "false"],
+    );
+    let observer = Observer::start(&cluster.observer_args(), "front")
+        .await
+        .unwrap();
+    cluster.spawn_all().unwrap();
+    cluster.wait_live(Duration::from_secs(30)).unwrap();
+    assert!(
+        observer
+            .wait_for(Duration::from_secs(60), |r| r.len() >= 8)
+            .await,
+        "fewer than 8 cones messages within 60 s: {}",
+        observer.count()
+    );
+    let received = observer.snapshot();
+    let (relative, matched, usable) = errors(&fixture, &received);
+    let median_error = median(&relative).unwrap();
+    let p90_error = percentile(&relative, 90.0).unwrap();
+    let shm = cluster.metric("keypoints", "conesight_shared_memory_messages_total");
+    let bad = cluster.metric("keypoints", "conesight_frames_dropped_total");
+    println!(
+        "JPEG q90 without shared memory, {} frames: {matched}/{usable} matched; relative error median {:.2} %, p90 {:.2} %; {shm} messages in shared memory, {bad} dropped",
+        received.len(),
+        100.0 * median_error,
+        100.0 * p90_error
+    );
+    assert_eq!(shm, 0.0, "shared memory was off");
+    assert!(
+        matched as f64 >= MIN_MATCHED_SHARE * usable as f64,
+        "matched {matched} of {usable}"
+    );
+    assert!(
+        median_error <= MAX_MEDIAN_RELATIVE_ERROR,
+        "median {median_error}"
+    );
+    assert!(p90_error <= MAX_P90_RELATIVE_ERROR, "p90 {p90_error}");
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn overload_and_slow_consumer_keep_memory_bounded_and_frames_fresh() {
     let fixture = Fixture::render("overload", 2).unwrap();
     // 30 Hz is 3x the 10 Hz target.
-    let mut cluster = cluster(&fixture, "e2e-overload", 30.0, &[]);
+    let mut cluster = cluster(&fixture, "e2e-overload", 30.0, &[], &[]);
     let observer = Observer::start(&cluster.observer_args(), "front")
         .await
         .unwrap();

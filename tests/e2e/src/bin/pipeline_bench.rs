@@ -49,12 +49,28 @@ fn detector_model() -> anyhow::Result<(PathBuf, &'static str)> {
 #[tokio::main]
 async fn main() -> anyhow::Result<()> {
     let mut seconds = 8.0_f64;
+    let mut threads: Option<usize> = None;
+    let mut spinning: Option<bool> = None;
     let mut args = std::env::args().skip(1);
     while let Some(arg) = args.next() {
         match arg.as_str() {
             "--seconds" => seconds = args.next().context("--seconds S")?.parse()?,
-            other => anyhow::bail!("unknown argument {other}; usage: pipeline-bench [--seconds S]"),
+            "--onnx-threads" => threads = Some(args.next().context("--onnx-threads N")?.parse()?),
+            "--onnx-spinning" => {
+                spinning = Some(args.next().context("--onnx-spinning true|false")?.parse()?);
+            }
+            other => anyhow::bail!(
+                "unknown argument {other}; usage: pipeline-bench [--seconds S] [--onnx-threads N] [--onnx-spinning true|false]"
+            ),
         }
+    }
+    // The same ONNX Runtime settings in-process and in the services.
+    let mut onnx_args: Vec<String> = Vec::new();
+    if let Some(n) = threads {
+        onnx_args.extend(["--onnx-threads".to_owned(), n.to_string()]);
+    }
+    if let Some(spin) = spinning {
+        onnx_args.extend(["--onnx-spinning".to_owned(), spin.to_string()]);
     }
     let exe = std::env::current_exe()?
         .parent()
@@ -68,7 +84,9 @@ async fn main() -> anyhow::Result<()> {
     let (detector, detector_note) = detector_model()?;
     let load = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
     println!(
-        "pipeline benchmark: 1920x1200 frames, {detector_note}; load average {}",
+        "pipeline benchmark: 1920x1200 frames, {detector_note}; ONNX Runtime threads {}, spinning {}; load average {}",
+        threads.map_or_else(|| "default".to_owned(), |n| n.to_string()),
+        spinning.map_or_else(|| "default".to_owned(), |s| s.to_string()),
         load.split_whitespace()
             .take(3)
             .collect::<Vec<_>>()
@@ -80,6 +98,11 @@ async fn main() -> anyhow::Result<()> {
     let first = &fixture.frames[0];
     let config = PipelineConfig {
         detector: Some(detector.clone()),
+        onnx: conesight_onnx::ModelOptions {
+            library: None,
+            intra_threads: threads,
+            allow_spinning: spinning,
+        },
         ..PipelineConfig::default()
     };
     let mut pipeline = InProcessPipeline::load(&config, &first.camera, &first.extrinsics)?;
@@ -120,9 +143,13 @@ async fn main() -> anyhow::Result<()> {
         &[
             (
                 "detector",
-                vec!["--model".to_owned(), detector.display().to_string()],
+                [
+                    vec!["--model".to_owned(), detector.display().to_string()],
+                    onnx_args.clone(),
+                ]
+                .concat(),
             ),
-            ("keypoints", Vec::new()),
+            ("keypoints", onnx_args.clone()),
             ("localiser", Vec::new()),
             ("camera", camera_args(RATES_HZ[0])),
         ],
@@ -214,6 +241,16 @@ async fn main() -> anyhow::Result<()> {
             )
         })
         .collect();
+    let shared: Vec<String> = ["detector", "keypoints"]
+        .iter()
+        .map(|n| {
+            format!(
+                "{n} {} of {}",
+                cluster.metric(n, "conesight_shared_memory_messages_total"),
+                cluster.metric(n, "conesight_frames_received_total")
+            )
+        })
+        .collect();
     drop(cluster);
 
     println!(
@@ -268,6 +305,10 @@ async fn main() -> anyhow::Result<()> {
     println!(
         "\nframes dropped (newest wins, whole sweep): {}",
         dropped.join(", ")
+    );
+    println!(
+        "inputs that arrived in shared memory: {}",
+        shared.join(", ")
     );
     println!(
         "highest rate sustained (out >= 95 % of in, latency growth <= 20 % of p50 + 5 ms): {best_rate:.0} Hz"
