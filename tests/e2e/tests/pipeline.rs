@@ -97,10 +97,8 @@ fn errors(fixture: &Fixture, received: &[Received]) -> (Vec<f64>, usize, usize) 
     (relative, matched, usable)
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn frames_in_cones_out_within_model_accuracy_then_restart_each_service() {
-    let fixture = Fixture::render("e2e", 3).unwrap();
-    let mut cluster = cluster(&fixture, "e2e-main", 5.0, &[], &[]);
+/// Starts every service of `cluster`, waits for `count` cones messages and returns them.
+async fn start_and_collect(cluster: &mut Cluster, count: usize) -> (Observer, Vec<Received>) {
     let observer = Observer::start(&cluster.observer_args(), "front")
         .await
         .unwrap();
@@ -108,17 +106,22 @@ async fn frames_in_cones_out_within_model_accuracy_then_restart_each_service() {
     cluster.wait_live(Duration::from_secs(30)).unwrap();
     assert!(
         observer
-            .wait_for(Duration::from_secs(60), |r| r.len() >= 12)
+            .wait_for(Duration::from_secs(60), |r| r.len() >= count)
             .await,
-        "fewer than 12 cones messages within 60 s: {}",
+        "fewer than {count} cones messages within 60 s: {}",
         observer.count()
     );
     let received = observer.snapshot();
-    let (relative, matched, usable) = errors(&fixture, &received);
+    (observer, received)
+}
+
+/// Asserts the located cones of `received` are within the model's measured accuracy.
+fn assert_within_model_accuracy(fixture: &Fixture, received: &[Received], what: &str) {
+    let (relative, matched, usable) = errors(fixture, received);
     let median_error = median(&relative).unwrap();
     let p90_error = percentile(&relative, 90.0).unwrap();
     println!(
-        "{} frames: {matched}/{usable} usable true cones matched; relative position error median {:.2} %, p90 {:.2} %",
+        "{what}, {} frames: {matched}/{usable} usable true cones matched; relative position error median {:.2} %, p90 {:.2} %",
         received.len(),
         100.0 * median_error,
         100.0 * p90_error
@@ -132,6 +135,14 @@ async fn frames_in_cones_out_within_model_accuracy_then_restart_each_service() {
         "median {median_error}"
     );
     assert!(p90_error <= MAX_P90_RELATIVE_ERROR, "p90 {p90_error}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn frames_in_cones_out_within_model_accuracy_then_restart_each_service() {
+    let fixture = Fixture::render("e2e", 3).unwrap();
+    let mut cluster = cluster(&fixture, "e2e-main", 5.0, &[], &[]);
+    let (observer, received) = start_and_collect(&mut cluster, 12).await;
+    assert_within_model_accuracy(&fixture, &received, "raw frames, shared memory");
     // Readiness: every service with inputs is ready while frames flow.
     for name in ["keypoints", "localiser", "camera"] {
         let (status, body) = cluster.http(name, "/readyz").unwrap();
@@ -203,40 +214,12 @@ async fn jpeg_frames_through_the_socket_as_between_hosts() {
         &["--frame-encoding", "jpeg", "--jpeg-quality", "90"],
         &["--zenoh-shm", "false"],
     );
-    let observer = Observer::start(&cluster.observer_args(), "front")
-        .await
-        .unwrap();
-    cluster.spawn_all().unwrap();
-    cluster.wait_live(Duration::from_secs(30)).unwrap();
-    assert!(
-        observer
-            .wait_for(Duration::from_secs(60), |r| r.len() >= 8)
-            .await,
-        "fewer than 8 cones messages within 60 s: {}",
-        observer.count()
-    );
-    let received = observer.snapshot();
-    let (relative, matched, usable) = errors(&fixture, &received);
-    let median_error = median(&relative).unwrap();
-    let p90_error = percentile(&relative, 90.0).unwrap();
+    let (_observer, received) = start_and_collect(&mut cluster, 8).await;
     let shm = cluster.metric("keypoints", "conesight_shared_memory_messages_total");
-    let bad = cluster.metric("keypoints", "conesight_frames_dropped_total");
-    println!(
-        "JPEG q90 without shared memory, {} frames: {matched}/{usable} matched; relative error median {:.2} %, p90 {:.2} %; {shm} messages in shared memory, {bad} dropped",
-        received.len(),
-        100.0 * median_error,
-        100.0 * p90_error
-    );
+    let received_frames = cluster.metric("keypoints", "conesight_frames_received_total");
+    println!("keypoints: {shm} of {received_frames} inputs arrived in shared memory");
     assert_eq!(shm, 0.0, "shared memory was off");
-    assert!(
-        matched as f64 >= MIN_MATCHED_SHARE * usable as f64,
-        "matched {matched} of {usable}"
-    );
-    assert!(
-        median_error <= MAX_MEDIAN_RELATIVE_ERROR,
-        "median {median_error}"
-    );
-    assert!(p90_error <= MAX_P90_RELATIVE_ERROR, "p90 {p90_error}");
+    assert_within_model_accuracy(&fixture, &received, "JPEG q90 without shared memory");
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
