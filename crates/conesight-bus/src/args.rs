@@ -67,9 +67,9 @@ pub struct ZenohArgs {
     /// turns it off.
     #[arg(long = "zenoh-shm", env = "CONESIGHT_ZENOH_SHM")]
     pub shared_memory: Option<bool>,
-    /// Size of the shared-memory pool Zenoh copies large messages into, MiB (Zenoh's default
-    /// is 16 MiB, two raw 1920x1200 frames; too small a pool makes large messages fall back to
-    /// the socket).
+    /// Size of the shared-memory pool frames are written into, MiB (default 64 without a config
+    /// file: nine raw 1920x1200 frames; Zenoh's own default is 16 MiB, two frames; too small a
+    /// pool makes large messages fall back to the socket). Zenoh locks the pool in memory.
     #[arg(long = "zenoh-shm-pool-mb", env = "CONESIGHT_ZENOH_SHM_POOL_MB")]
     pub shm_pool_mb: Option<usize>,
     /// Run namespace: `live` on the car, a fresh name per replay so runs never mix.

@@ -1,6 +1,12 @@
 //! The one encode/decode pair: protobuf (prost) in a Zenoh payload, with a size limit checked
 //! before parsing.
+//!
+//! Decoding is zero-copy for `bytes` fields (an image frame's pixels): a contiguous payload
+//! (one slice, as a frame in Zenoh's shared memory or a reassembled message always is) is
+//! wrapped as a `bytes::Bytes` that owns the `ZBytes`, and prost slices the field out of it.
+//! The pixels then stay in the payload's buffer until the last view of them is dropped.
 
+use bytes::Bytes;
 use zenoh::bytes::ZBytes;
 
 use crate::error::DecodeError;
@@ -32,11 +38,31 @@ pub fn decode_with_limit<M: prost::Message + Default>(
             limit,
         });
     }
-    M::decode(payload.to_bytes().as_ref()).map_err(|source| DecodeError::Malformed {
+    M::decode(payload_bytes(payload)).map_err(|source| DecodeError::Malformed {
         message_type,
         bytes,
         source,
     })
+}
+
+/// A contiguous payload, owned, seen as one byte slice (for `Bytes::from_owner`).
+struct ContiguousPayload(ZBytes);
+
+impl AsRef<[u8]> for ContiguousPayload {
+    fn as_ref(&self) -> &[u8] {
+        // Built only for payloads of exactly one slice (`payload_bytes`).
+        self.0.slices().next().unwrap_or(&[])
+    }
+}
+
+/// The payload as `Bytes`: a view without a copy when it is one slice, else a copy.
+pub fn payload_bytes(payload: &ZBytes) -> Bytes {
+    let mut slices = payload.slices();
+    match (slices.next(), slices.next()) {
+        (Some(_), None) => Bytes::from_owner(ContiguousPayload(payload.clone())),
+        (None, _) => Bytes::new(),
+        _ => Bytes::from(payload.to_bytes().into_owned()),
+    }
 }
 
 /// `Detections` for `conesight_proto::pb::Detections`.

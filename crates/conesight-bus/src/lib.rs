@@ -12,7 +12,10 @@
 //! - [`qos`]: [`declare_publisher`], [`declare_subscriber`] and [`publish`], encoding the QoS
 //!   rules per [`Stream`] ([`StreamQos`]): frames Drop + Data priority with a ring channel of 1
 //!   on the subscriber (newest frame wins), small messages Block + RealTime + express.
-//! - [`codec`]: the one [`encode`] / [`decode`] pair (protobuf, with a size limit).
+//! - [`codec`]: the one [`encode`] / [`decode`] pair (protobuf, with a size limit; `bytes`
+//!   fields such as a frame's pixels are decoded without a copy).
+//! - [`payload`]: [`write_payload`], a large payload written once, into the session's shared
+//!   memory when it has a pool (how the camera publishes raw frames).
 //! - [`error`]: [`BusError`] and [`DecodeError`].
 //!
 //! Entry point: `open_session(&args).await`, then `Topics::from_args(&args)?` and
@@ -21,14 +24,19 @@
 pub mod args;
 pub mod codec;
 pub mod error;
+pub mod payload;
 pub mod qos;
 pub mod session;
 pub mod topics;
 
 pub use args::{FrameEncoding, ZenohArgs, ZenohMode};
-pub use codec::{DEFAULT_MAX_MESSAGE_BYTES, decode, decode_with_limit, encode};
+pub use codec::{DEFAULT_MAX_MESSAGE_BYTES, decode, decode_with_limit, encode, payload_bytes};
 pub use error::{BusError, DecodeError};
-pub use qos::{RingSubscriber, StreamQos, declare_publisher, declare_subscriber, publish};
+pub use payload::{PayloadStorage, write_payload, write_payload_infallible};
+pub use qos::{
+    RingSubscriber, StreamQos, declare_callback_subscriber, declare_publisher, declare_subscriber,
+    publish, publish_payload,
+};
 pub use session::{open_session, zenoh_config};
 pub use topics::{Stream, Topics};
 

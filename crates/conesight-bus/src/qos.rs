@@ -9,7 +9,7 @@
 //! blocks Zenoh's receive path (a FIFO that fills would stall every stream on that link).
 
 use zenoh::Session;
-use zenoh::bytes::Encoding;
+use zenoh::bytes::{Encoding, ZBytes};
 use zenoh::handlers::{RingChannel, RingChannelHandler};
 use zenoh::key_expr::KeyExpr;
 use zenoh::pubsub::{Publisher, Subscriber};
@@ -96,6 +96,17 @@ pub async fn publish<M: prost::Message>(
         })
 }
 
+/// Publishes a payload already encoded (e.g. by [`crate::write_payload`]).
+pub async fn publish_payload(publisher: &Publisher<'_>, payload: ZBytes) -> Result<(), BusError> {
+    publisher
+        .put(payload)
+        .await
+        .map_err(|source| BusError::Put {
+            key: publisher.key_expr().to_string(),
+            source,
+        })
+}
+
 /// A subscriber whose ring channel keeps only the newest samples.
 pub type RingSubscriber = Subscriber<RingChannelHandler<Sample>>;
 
@@ -110,6 +121,25 @@ pub async fn declare_subscriber(
     session
         .declare_subscriber(key.clone())
         .with(RingChannel::new(ring))
+        .await
+        .map_err(|source| BusError::Declare {
+            role: "subscriber",
+            key: key.to_string(),
+            source,
+        })
+}
+
+/// A subscriber to `key` whose `callback` runs on Zenoh's receive thread for every sample:
+/// no channel and no async task between the bus and the callback (the services hand samples
+/// straight to their worker thread this way). Keep the callback short and non-blocking.
+pub async fn declare_callback_subscriber(
+    session: &Session,
+    key: KeyExpr<'static>,
+    callback: impl Fn(Sample) + Send + Sync + 'static,
+) -> Result<Subscriber<()>, BusError> {
+    session
+        .declare_subscriber(key.clone())
+        .callback(callback)
         .await
         .map_err(|source| BusError::Declare {
             role: "subscriber",

@@ -5,9 +5,15 @@ use zenoh::{Config, Session};
 use crate::args::{ZenohArgs, ZenohMode};
 use crate::error::BusError;
 
+/// Shared-memory pool of a session without a config file, MiB: nine raw 1920x1200 RGB8 frames
+/// (6.9 MB each), so frames still held by subscribers (the detector's slot, the keypoint
+/// service's pairing cache) leave room for new ones. Zenoh's own default, 16 MiB, holds two.
+pub const DEFAULT_SHM_POOL_MB: usize = 64;
+
 /// The Zenoh config of `args`: the config file (or Zenoh's defaults), then the flags given on
 /// top: mode (peer without a file), endpoints, multicast scouting (off without a file) and
-/// shared memory (Zenoh's default, on, unless turned off).
+/// shared memory (Zenoh's default, on, unless turned off) with a pool of `--zenoh-shm-pool-mb`
+/// ([`DEFAULT_SHM_POOL_MB`] without a file).
 pub fn zenoh_config(args: &ZenohArgs) -> Result<Config, BusError> {
     let mut config = match &args.config {
         Some(path) => Config::from_file(path).map_err(|source| BusError::ConfigFile {
@@ -47,7 +53,12 @@ pub fn zenoh_config(args: &ZenohArgs) -> Result<Config, BusError> {
             enabled.to_string(),
         )?;
     }
-    if let Some(pool_mb) = args.shm_pool_mb {
+    let pool_mb = match (args.shm_pool_mb, &args.config) {
+        (Some(pool_mb), _) => Some(pool_mb),
+        (None, None) => Some(DEFAULT_SHM_POOL_MB),
+        (None, Some(_)) => None,
+    };
+    if let Some(pool_mb) = pool_mb {
         set(
             &mut config,
             "transport/shared_memory/transport_optimization/pool_size",
@@ -100,6 +111,13 @@ mod tests {
         let config = zenoh_config(&ZenohArgs::default()).unwrap();
         assert_eq!(get(&config, "mode"), "\"peer\"");
         assert_eq!(get(&config, "scouting/multicast/enabled"), "false");
+        assert_eq!(
+            get(
+                &config,
+                "transport/shared_memory/transport_optimization/pool_size"
+            ),
+            (DEFAULT_SHM_POOL_MB << 20).to_string()
+        );
     }
 
     #[test]

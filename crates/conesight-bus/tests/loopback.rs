@@ -10,7 +10,8 @@ use std::time::{Duration, Instant};
 use conesight_bus::zenoh::Session;
 use conesight_bus::zenoh::qos::{CongestionControl, Priority};
 use conesight_bus::{
-    Stream, Topics, ZenohArgs, declare_publisher, declare_subscriber, decode, open_session, publish,
+    PayloadStorage, Stream, Topics, ZenohArgs, declare_publisher, declare_subscriber, decode,
+    open_session, publish, publish_payload, write_payload,
 };
 use conesight_proto::pb;
 
@@ -180,6 +181,72 @@ async fn slow_frame_subscriber_gets_the_newest_frame() {
     assert_eq!(received.to_rgb().unwrap().get_pixel(0, 0).0[0], LAST as u8);
     assert!(slow.try_recv().unwrap().is_none(), "older frames were kept");
 
+    publisher_session.close().await.unwrap();
+    subscriber_session.close().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn frames_written_in_place_arrive_in_shared_memory_and_decode_without_a_copy() {
+    let (publisher_session, subscriber_session, topics) = two_peers("test-in-place").await;
+    let frames = declare_subscriber(
+        &subscriber_session,
+        topics.all_cameras(Stream::Frame).unwrap(),
+        Stream::Frame,
+    )
+    .await
+    .unwrap();
+    let publisher = declare_publisher(&publisher_session, &topics, "front", Stream::Frame)
+        .await
+        .unwrap();
+    // The session's pool starts on first use; give it a moment (it may never come: no memlock).
+    let started = Instant::now();
+    while publisher_session.get_shm_provider().into_option().is_none()
+        && started.elapsed() < Duration::from_secs(3)
+    {
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    let image = image::RgbImage::from_fn(320, 240, |x, y| {
+        image::Rgb([x as u8, y as u8, (x ^ y) as u8])
+    });
+    let head = pb::ImageFrame::rgb_header_only(
+        pb::Header::new("front", 9, 1_009, "front_optical"),
+        320,
+        240,
+    );
+    let len = head.encoded_len_with_pixels(image.as_raw().len());
+    let started = Instant::now();
+    let (sample, storage) = loop {
+        assert!(started.elapsed() < PROPAGATION_TIMEOUT, "no frame arrived");
+        let (payload, storage) = write_payload(&publisher_session, len, |mut buf: &mut [u8]| {
+            head.encode_with_pixels(image.as_raw(), &mut buf)
+        })
+        .unwrap();
+        publish_payload(&publisher, payload).await.unwrap();
+        let wait = tokio::time::timeout(Duration::from_millis(100), frames.recv_async());
+        if let Ok(Ok(sample)) = wait.await {
+            break (sample, storage);
+        }
+    };
+    let payload = sample.payload();
+    let frame: pb::ImageFrame = decode(payload).unwrap();
+    let shared = frame.into_shared_rgb().unwrap();
+    assert_eq!(shared.as_raw().as_ref(), image.as_raw().as_slice());
+    // No copy: the decoded pixels are a view into the received payload's one slice.
+    let slices: Vec<&[u8]> = payload.slices().collect();
+    assert_eq!(slices.len(), 1);
+    let inside = slices[0].as_ptr() as usize..slices[0].as_ptr() as usize + slices[0].len();
+    assert!(inside.contains(&(shared.as_raw().as_ptr() as usize)));
+    if storage == PayloadStorage::SharedMemory {
+        assert!(
+            payload.as_shm().is_some(),
+            "written in shared memory, received by copy"
+        );
+    } else {
+        eprintln!(
+            "shared-memory part skipped: the session has no pool (shared memory needs a memlock \
+             allowance of the pool size, or CAP_IPC_LOCK)"
+        );
+    }
     publisher_session.close().await.unwrap();
     subscriber_session.close().await.unwrap();
 }

@@ -1,10 +1,11 @@
 //! [`Detector`]: a loaded model with its card, from frame to [`Detection`]s.
 
+use std::ops::Deref;
 use std::path::{Path, PathBuf};
 
 use conesight_core::ConeClass;
 use conesight_onnx::{ModelOptions, OnnxModel};
-use image::RgbImage;
+use image::{ImageBuffer, Rgb};
 
 use crate::card::{Layout, ModelCard};
 use crate::decode::decode;
@@ -109,7 +110,10 @@ impl Detector {
     }
 
     /// Detects the cones of one RGB frame.
-    pub fn detect(&mut self, frame: &RgbImage) -> Result<Vec<Detection>, DetectError> {
+    pub fn detect<C: Deref<Target = [u8]>>(
+        &mut self,
+        frame: &ImageBuffer<Rgb<u8>, C>,
+    ) -> Result<Vec<Detection>, DetectError> {
         let (input, mapping) = self.preprocess(frame)?;
         let outputs = self.model.run(vec![input])?;
         let output = outputs.first().ok_or_else(|| DetectError::BadOutputShape {
@@ -124,9 +128,9 @@ impl Detector {
     }
 
     /// The network input for `frame` and its mapping back to frame pixels.
-    pub fn preprocess(
+    pub fn preprocess<C: Deref<Target = [u8]>>(
         &self,
-        frame: &RgbImage,
+        frame: &ImageBuffer<Rgb<u8>, C>,
     ) -> Result<(conesight_onnx::TensorF32, InputMapping), DetectError> {
         match self.card.layout {
             Layout::ConesightBand => {

@@ -12,8 +12,10 @@
 //!   round(dh - 0.1))` with `dw, dh` half the padding, pad grey 114, RGB / 255, NCHW.
 //!   `frame = (input - pad) / r`.
 
+use std::ops::Deref;
+
 use conesight_onnx::TensorF32;
-use image::RgbImage;
+use image::{ImageBuffer, Rgb};
 
 use crate::card::BandParams;
 use crate::error::DetectError;
@@ -47,8 +49,8 @@ impl InputMapping {
 }
 
 /// The band input of `frame` (see the module docs); errors when the frame does not fit.
-pub fn band_input(
-    frame: &RgbImage,
+pub fn band_input<C: Deref<Target = [u8]>>(
+    frame: &ImageBuffer<Rgb<u8>, C>,
     band: &BandParams,
 ) -> Result<(TensorF32, InputMapping), DetectError> {
     let (width, height) = frame.dimensions();
@@ -121,8 +123,8 @@ pub fn band_input(
 }
 
 /// The Ultralytics letterbox input of `frame` at `width x height` (see the module docs).
-pub fn letterbox_input(
-    frame: &RgbImage,
+pub fn letterbox_input<C: Deref<Target = [u8]>>(
+    frame: &ImageBuffer<Rgb<u8>, C>,
     width: usize,
     height: usize,
 ) -> Result<(TensorF32, InputMapping), DetectError> {
@@ -184,6 +186,7 @@ pub fn letterbox_input(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use image::RgbImage;
 
     fn gradient(width: u32, height: u32) -> RgbImage {
         RgbImage::from_fn(width, height, |x, y| {

@@ -180,9 +180,9 @@ impl KeypointNet {
 
     /// Crops every box of `image`, runs one batched inference and maps the keypoints (and
     /// sigmas) back to image pixels.
-    pub fn predict_boxes(
+    pub fn predict_boxes<C: std::ops::Deref<Target = [u8]>>(
         &mut self,
-        image: &RgbImage,
+        image: &conesight_vision::RgbBuffer<C>,
         boxes: &[PixelBox],
     ) -> Result<Vec<ConeKeypoints>, KeypointError> {
         let mut patches = Vec::with_capacity(boxes.len());

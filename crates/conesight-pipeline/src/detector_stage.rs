@@ -5,6 +5,7 @@
 //! are mapped back, so any image size works; the band's first row follows the calibration's
 //! horizon when one is set ([`DetectorStage::set_calibration`]).
 
+use std::ops::Deref;
 use std::path::Path;
 
 use conesight_core::{Camera, Extrinsics};
@@ -12,7 +13,7 @@ use conesight_detect::horizon::{band_top_from_horizon, horizon_row_px};
 use conesight_detect::{Detector, DetectorConfig};
 use conesight_onnx::ModelOptions;
 use conesight_proto::ConeDetection;
-use conesight_vision::PixelBox;
+use conesight_vision::{PixelBox, RgbBuffer};
 use image::{Rgb, RgbImage, imageops};
 
 use crate::error::PipelineError;
@@ -52,7 +53,10 @@ impl DetectorStage {
     }
 
     /// Detects the cones of `frame` (any size); boxes in `frame`'s pixels.
-    pub fn detect(&mut self, frame: &RgbImage) -> Result<Vec<ConeDetection>, PipelineError> {
+    pub fn detect<C: Deref<Target = [u8]>>(
+        &mut self,
+        frame: &RgbBuffer<C>,
+    ) -> Result<Vec<ConeDetection>, PipelineError> {
         let Some(band) = self.detector.card().band else {
             // Letterbox layouts take any size.
             return Ok(self.detector.detect(frame)?.iter().map(to_core).collect());
@@ -68,7 +72,7 @@ impl DetectorStage {
         }
         let height_px = ((f64::from(frame.height()) * scale).round() as u32).max(1);
         let resized = if frame.width() == width_px {
-            frame.clone()
+            RgbImage::from_fn(frame.width(), frame.height(), |x, y| *frame.get_pixel(x, y))
         } else {
             imageops::resize(frame, width_px, height_px, imageops::FilterType::Triangle)
         };

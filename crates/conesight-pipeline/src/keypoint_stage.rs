@@ -7,7 +7,6 @@ use conesight_keypoints::KeypointNet;
 use conesight_onnx::ModelOptions;
 use conesight_proto::{ConeDetection, ConeKeypoints};
 use conesight_vision::{CropError, PatchTransform};
-use image::RgbImage;
 
 use crate::error::PipelineError;
 
@@ -62,9 +61,9 @@ impl KeypointStage {
 
     /// Keypoints of `detections` in `frame`: invalid boxes are rejected, at most the cap's
     /// highest-scoring boxes go through one batched call.
-    pub fn predict(
+    pub fn predict<C: std::ops::Deref<Target = [u8]>>(
         &mut self,
-        frame: &RgbImage,
+        frame: &conesight_vision::RgbBuffer<C>,
         detections: &[ConeDetection],
     ) -> Result<KeypointOutput, PipelineError> {
         let mut output = KeypointOutput::default();

@@ -12,10 +12,16 @@ use std::time::Duration;
 
 use anyhow::Context;
 use conesight_bus::zenoh::Session;
+use conesight_bus::zenoh::key_expr::KeyExpr;
+use conesight_bus::zenoh::pubsub::Subscriber;
 use conesight_bus::zenoh::sample::Sample;
-use conesight_bus::{Topics, ZenohArgs, decode_with_limit, open_session};
+use conesight_bus::{
+    Topics, ZenohArgs, declare_callback_subscriber, decode_with_limit, open_session,
+};
 use conesight_core::{Camera, Extrinsics};
-use conesight_service::{ErrorReporter, HttpArgs, HttpState, Metrics, Readiness, router, serve};
+use conesight_service::{
+    ErrorReporter, HttpArgs, HttpState, Metrics, Readiness, Worker, router, serve,
+};
 use tokio::sync::watch;
 
 /// Default largest accepted message, MiB (a 4096x4096 raw frame fits).
@@ -180,6 +186,26 @@ impl Node {
             }
         });
         Ok(bound)
+    }
+
+    /// Hands every sample of `key` to `worker` straight from Zenoh's receive thread (counted as
+    /// received, marking the input fresh for `/readyz`): no channel or async task in between,
+    /// so a hop costs one thread wake-up. The worker's slot keeps the newest sample. Keep the
+    /// returned subscriber alive for as long as samples should flow.
+    pub async fn feed_worker(
+        &self,
+        key: KeyExpr<'static>,
+        worker: &Worker<Sample>,
+    ) -> Result<Subscriber<()>, conesight_bus::BusError> {
+        let submitter = worker.submitter();
+        let metrics = self.metrics.clone();
+        let readiness = self.readiness.clone();
+        declare_callback_subscriber(&self.session, key, move |sample| {
+            metrics.frame_received();
+            readiness.mark_input();
+            submitter.submit(sample);
+        })
+        .await
     }
 
     /// Decodes a sample as `M` (at most `limit` bytes); on failure counts and logs the error

@@ -91,6 +91,16 @@ pub enum ProtoError {
         /// The codec's message.
         reason: String,
     },
+    /// A message does not fit the buffer it is encoded into (a publisher's payload buffer).
+    #[error(
+        "the encoded message needs {needed_bytes} bytes but the buffer has {available_bytes};          allocate `encoded_len_with_pixels` bytes"
+    )]
+    BufferTooSmall {
+        /// Bytes the message needs.
+        needed_bytes: usize,
+        /// Bytes the buffer had room for.
+        available_bytes: usize,
+    },
 }
 
 impl ProtoError {
@@ -106,6 +116,7 @@ impl ProtoError {
             Self::InvalidString { .. } => "invalid_string",
             Self::ImageSize { .. } => "image_size",
             Self::Jpeg { .. } => "jpeg",
+            Self::BufferTooSmall { .. } => "buffer_too_small",
         }
     }
 
@@ -132,7 +143,7 @@ impl ProtoError {
             | Self::TooMany { field, .. }
             | Self::UnknownEnum { field, .. }
             | Self::InvalidString { field, .. } => Some(field),
-            Self::ImageSize { .. } | Self::Jpeg { .. } => None,
+            Self::ImageSize { .. } | Self::Jpeg { .. } | Self::BufferTooSmall { .. } => None,
         }
     }
 }

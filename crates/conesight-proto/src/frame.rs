@@ -2,12 +2,22 @@
 
 use std::io::Cursor;
 
-use bytes::Bytes;
-use image::{ImageFormat, ImageReader, Limits, RgbImage};
+use bytes::{BufMut, Bytes};
+use image::{ImageBuffer, ImageFormat, ImageReader, Limits, Rgb, RgbImage};
+use prost::Message;
+use prost::encoding::{WireType, encode_key, encode_varint, encoded_len_varint, key_len};
 
 use crate::error::ProtoError;
 use crate::limits::{MAX_IMAGE_SIDE_PX, RAW_BYTES_PER_PIXEL};
 use crate::pb::{self, ImageEncoding};
+
+/// An RGB8 frame whose pixels are the received message's bytes (see
+/// [`pb::ImageFrame::into_shared_rgb`]): no copy for raw RGB8 frames, even when the message
+/// lies in Zenoh's shared memory.
+pub type SharedRgbImage = ImageBuffer<Rgb<u8>, Bytes>;
+
+/// Field number of `ImageFrame.data` (proto/conesight/v1/frame.proto).
+const DATA_FIELD: u32 = 5;
 
 /// Largest allocation the JPEG decoder may make: one RGB8 image at the largest side, plus slack.
 const JPEG_MAX_ALLOC_BYTES: u64 =
@@ -45,6 +55,54 @@ impl pb::ImageFrame {
             encoding: ImageEncoding::Jpeg.into(),
             data: Bytes::from(jpeg),
         })
+    }
+
+    /// The header and dimensions of a raw RGB8 frame of `width_px` x `height_px`, without the
+    /// pixels: with [`Self::encoded_len_with_pixels`] and [`Self::encode_with_pixels`] the
+    /// pixels are written once, straight into the publisher's buffer (e.g. shared memory).
+    pub fn rgb_header_only(header: pb::Header, width_px: u32, height_px: u32) -> Self {
+        Self {
+            header: Some(header),
+            width_px,
+            height_px,
+            encoding: ImageEncoding::Rgb8.into(),
+            data: Bytes::new(),
+        }
+    }
+
+    /// Encoded size of this message (whose `data` is empty) once `pixel_bytes` of pixels are
+    /// appended as its `data` field.
+    pub fn encoded_len_with_pixels(&self, pixel_bytes: usize) -> usize {
+        debug_assert!(self.data.is_empty(), "data must be empty: it is appended");
+        self.encoded_len()
+            + key_len(DATA_FIELD)
+            + encoded_len_varint(pixel_bytes as u64)
+            + pixel_bytes
+    }
+
+    /// Encodes this message (whose `data` is empty) followed by `pixels` as its `data` field:
+    /// the same message as `data = pixels` (protobuf fields may come in any order), with one
+    /// copy of the pixels. `buf` needs [`Self::encoded_len_with_pixels`] bytes of room.
+    pub fn encode_with_pixels(
+        &self,
+        pixels: &[u8],
+        buf: &mut impl BufMut,
+    ) -> Result<(), ProtoError> {
+        let needed = self.encoded_len_with_pixels(pixels.len());
+        if buf.remaining_mut() < needed {
+            return Err(ProtoError::BufferTooSmall {
+                needed_bytes: needed,
+                available_bytes: buf.remaining_mut(),
+            });
+        }
+        self.encode(buf).map_err(|_| ProtoError::BufferTooSmall {
+            needed_bytes: needed,
+            available_bytes: 0,
+        })?;
+        encode_key(DATA_FIELD, WireType::LengthDelimited, buf);
+        encode_varint(pixels.len() as u64, buf);
+        buf.put_slice(pixels);
+        Ok(())
     }
 
     /// Checks the dimensions (1..=[`MAX_IMAGE_SIDE_PX`]), the encoding and, for raw encodings,
@@ -95,6 +153,34 @@ impl pb::ImageFrame {
     /// [`Self::into_rgb`] to reuse them.
     pub fn to_rgb(&self) -> Result<RgbImage, ProtoError> {
         self.clone().into_rgb()
+    }
+
+    /// The frame as an RGB8 image that shares the message's bytes: no pixel copy for RGB8
+    /// frames (decode the message from a `Bytes` view of the payload, as
+    /// `conesight_bus::decode_with_limit` does, and the image is a view of the payload);
+    /// BGR8 and JPEG frames are converted as in [`Self::into_rgb`].
+    pub fn into_shared_rgb(self) -> Result<SharedRgbImage, ProtoError> {
+        let encoding = self.validate()?;
+        let (width_px, height_px) = (self.width_px, self.height_px);
+        if encoding == ImageEncoding::Rgb8 {
+            let actual_bytes = self.data.len();
+            return ImageBuffer::from_raw(width_px, height_px, self.data).ok_or(
+                ProtoError::ImageSize {
+                    width_px,
+                    height_px,
+                    expected_bytes: width_px as usize * height_px as usize * RAW_BYTES_PER_PIXEL,
+                    actual_bytes,
+                },
+            );
+        }
+        let image = self.into_rgb()?;
+        let (w, h) = image.dimensions();
+        ImageBuffer::from_raw(w, h, Bytes::from(image.into_raw())).ok_or(ProtoError::ImageSize {
+            width_px: w,
+            height_px: h,
+            expected_bytes: w as usize * h as usize * RAW_BYTES_PER_PIXEL,
+            actual_bytes: 0,
+        })
     }
 
     /// Like [`Self::to_rgb`], reusing the decoded buffer for raw frames (no pixel copy when
@@ -151,7 +237,6 @@ fn decode_jpeg(data: &[u8]) -> Result<RgbImage, ProtoError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use prost::Message;
 
     fn gradient(width: u32, height: u32) -> RgbImage {
         RgbImage::from_fn(width, height, |x, y| {
@@ -161,6 +246,48 @@ mod tests {
 
     fn header() -> pb::Header {
         pb::Header::new("front", 1, 2, "front_optical")
+    }
+
+    #[test]
+    fn pixels_appended_once_decode_as_the_same_message() {
+        let image = gradient(33, 17);
+        let whole = pb::ImageFrame::from_rgb(header(), &image);
+        let head = pb::ImageFrame::rgb_header_only(header(), 33, 17);
+        let len = head.encoded_len_with_pixels(image.as_raw().len());
+        let mut buf = Vec::with_capacity(len);
+        head.encode_with_pixels(image.as_raw(), &mut buf).unwrap();
+        assert_eq!(buf.len(), len);
+        assert_eq!(len, whole.encoded_len());
+        let decoded = pb::ImageFrame::decode(Bytes::from(buf)).unwrap();
+        assert_eq!(decoded, whole);
+        let shared = decoded.into_shared_rgb().unwrap();
+        assert_eq!(shared.as_raw().as_ref(), image.as_raw().as_slice());
+    }
+
+    #[test]
+    fn appending_into_a_short_buffer_is_an_error() {
+        let head = pb::ImageFrame::rgb_header_only(header(), 4, 4);
+        let mut storage = [0_u8; 16];
+        let mut buf: &mut [u8] = &mut storage;
+        let err = head.encode_with_pixels(&[0; 48], &mut buf).unwrap_err();
+        assert!(matches!(err, ProtoError::BufferTooSmall { .. }), "{err}");
+    }
+
+    #[test]
+    fn shared_rgb_views_the_decoded_bytes_without_a_copy() {
+        let image = gradient(8, 4);
+        let encoded = Bytes::from(pb::ImageFrame::from_rgb(header(), &image).encode_to_vec());
+        let frame = pb::ImageFrame::decode(encoded.clone()).unwrap();
+        let shared = frame.into_shared_rgb().unwrap();
+        let inside = encoded.as_ptr() as usize..encoded.as_ptr() as usize + encoded.len();
+        assert!(inside.contains(&(shared.as_raw().as_ptr() as usize)));
+        assert_eq!(shared.as_raw().as_ref(), image.as_raw().as_slice());
+        let mut bgr = pb::ImageFrame::from_rgb(header(), &image);
+        bgr.encoding = ImageEncoding::Bgr8.into();
+        assert_eq!(
+            bgr.into_shared_rgb().unwrap().get_pixel(1, 0).0[0],
+            image.get_pixel(1, 0).0[2]
+        );
     }
 
     #[test]

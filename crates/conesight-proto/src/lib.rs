@@ -35,6 +35,7 @@ mod validate;
 pub use cone::LocatedCone;
 pub use detection::ConeDetection;
 pub use error::ProtoError;
+pub use frame::SharedRgbImage;
 pub use header::{is_valid_camera_id, now_ns, peek_header, require_header};
 pub use keypoints::{
     ConeKeypoints, MAX_KEYPOINT_WEIGHT, confidence_from_weight, weight_from_confidence,

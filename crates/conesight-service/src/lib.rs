@@ -34,4 +34,4 @@ pub use http::{HttpArgs, HttpState, router, serve};
 pub use metrics::Metrics;
 pub use shutdown::shutdown_signal;
 pub use telemetry::init_tracing;
-pub use worker::Worker;
+pub use worker::{Submitter, Worker};

@@ -5,6 +5,8 @@
 //! | `conesight_frames_received_total` | counter | |
 //! | `conesight_frames_processed_total` | counter | |
 //! | `conesight_frames_dropped_total` | counter | |
+//! | `conesight_shared_memory_messages_total` | counter | |
+//! | `conesight_shared_memory_published_total` | counter | |
 //! | `conesight_errors_total` | counter | `kind` |
 //! | `conesight_stage_latency_seconds` | histogram | `stage` |
 //! | `conesight_queue_depth` | gauge | |
@@ -46,6 +48,7 @@ pub struct Metrics {
     frames_processed: Counter,
     frames_dropped: Counter,
     shared_memory_messages: Counter,
+    shared_memory_published: Counter,
     errors: Family<OneLabel, Counter>,
     stage_latency: Family<OneLabel, Histogram, fn() -> Histogram>,
     queue_depth: Gauge,
@@ -65,6 +68,7 @@ impl Metrics {
         let frames_processed = Counter::default();
         let frames_dropped = Counter::default();
         let shared_memory_messages = Counter::default();
+        let shared_memory_published = Counter::default();
         let errors = Family::<OneLabel, Counter>::default();
         let stage_latency = Family::<OneLabel, Histogram, fn() -> Histogram>::new_with_constructor(
             latency_histogram,
@@ -90,6 +94,11 @@ impl Metrics {
             "Input messages that arrived in Zenoh shared memory (zero-copy, same host)",
             shared_memory_messages.clone(),
         );
+        registry.register(
+            "shared_memory_published",
+            "Output messages written straight into Zenoh shared memory (frames, one copy)",
+            shared_memory_published.clone(),
+        );
         registry.register("errors", "Errors by kind", errors.clone());
         registry.register(
             "stage_latency_seconds",
@@ -107,6 +116,7 @@ impl Metrics {
             frames_processed,
             frames_dropped,
             shared_memory_messages,
+            shared_memory_published,
             errors,
             stage_latency,
             queue_depth,
@@ -131,6 +141,11 @@ impl Metrics {
     /// Counts one input that arrived in shared memory.
     pub fn shared_memory_message(&self) {
         self.shared_memory_messages.inc();
+    }
+
+    /// Counts one output message written into shared memory.
+    pub fn shared_memory_published(&self) {
+        self.shared_memory_published.inc();
     }
 
     /// Input messages that arrived in shared memory so far.

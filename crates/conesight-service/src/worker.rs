@@ -61,20 +61,17 @@ impl<I: Send + 'static> Worker<I> {
     /// Hands `input` to the worker without blocking. An input still waiting is replaced and
     /// counted as dropped; it is returned.
     pub fn submit(&self, input: I) -> Option<I> {
-        let replaced = {
-            let mut state = self
-                .slot
-                .state
-                .lock()
-                .unwrap_or_else(PoisonError::into_inner);
-            state.waiting.replace(input)
-        };
-        self.slot.ready.notify_one();
-        self.metrics.set_queue_depth(1);
-        if replaced.is_some() {
-            self.metrics.frame_dropped();
+        submit_to(&self.slot, &self.metrics, input)
+    }
+
+    /// A cloneable handle that submits to this worker from anywhere (e.g. a Zenoh subscriber
+    /// callback on the bus's receive thread, so no async task sits between the bus and the
+    /// worker). Inputs submitted after [`Self::shutdown`] are discarded (returned).
+    pub fn submitter(&self) -> Submitter<I> {
+        Submitter {
+            slot: self.slot.clone(),
+            metrics: self.metrics.clone(),
         }
-        replaced
     }
 
     /// Stops taking inputs (one still waiting is discarded) and waits for the current one to
@@ -97,6 +94,45 @@ impl<I: Send + 'static> Worker<I> {
         drop(state);
         self.slot.ready.notify_all();
     }
+}
+
+/// Submits to a [`Worker`] (see [`Worker::submitter`]).
+#[derive(Debug)]
+pub struct Submitter<I> {
+    slot: Arc<Slot<I>>,
+    metrics: Arc<Metrics>,
+}
+
+impl<I> Clone for Submitter<I> {
+    fn clone(&self) -> Self {
+        Self {
+            slot: self.slot.clone(),
+            metrics: self.metrics.clone(),
+        }
+    }
+}
+
+impl<I> Submitter<I> {
+    /// [`Worker::submit`].
+    pub fn submit(&self, input: I) -> Option<I> {
+        submit_to(&self.slot, &self.metrics, input)
+    }
+}
+
+fn submit_to<I>(slot: &Slot<I>, metrics: &Metrics, input: I) -> Option<I> {
+    let replaced = {
+        let mut state = slot.state.lock().unwrap_or_else(PoisonError::into_inner);
+        if state.closed {
+            return Some(input);
+        }
+        state.waiting.replace(input)
+    };
+    slot.ready.notify_one();
+    metrics.set_queue_depth(1);
+    if replaced.is_some() {
+        metrics.frame_dropped();
+    }
+    replaced
 }
 
 impl<I> Drop for Worker<I> {
@@ -165,5 +201,24 @@ mod tests {
                 .contains("conesight_frames_dropped_total 2")
         );
         assert!(worker.shutdown());
+    }
+
+    #[test]
+    fn submitters_feed_the_same_slot_from_other_threads_and_stop_at_shutdown() {
+        let metrics = Arc::new(Metrics::new());
+        let (done_tx, done_rx) = mpsc::channel();
+        let worker = Worker::spawn("test-submitter", metrics, move |input: u32| {
+            done_tx.send(input).unwrap();
+        })
+        .unwrap();
+        let submitter = worker.submitter();
+        let other = submitter.clone();
+        std::thread::spawn(move || other.submit(7)).join().unwrap();
+        assert_eq!(done_rx.recv_timeout(Duration::from_secs(5)).unwrap(), 7);
+        assert_eq!(submitter.submit(8), None);
+        assert_eq!(done_rx.recv_timeout(Duration::from_secs(5)).unwrap(), 8);
+        assert!(worker.shutdown());
+        // After shutdown an input is handed back, not left in a slot nobody reads.
+        assert_eq!(submitter.submit(9), Some(9));
     }
 }

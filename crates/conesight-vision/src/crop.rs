@@ -22,10 +22,13 @@
 //! weights to 1/32, so values can differ by one grey level). No anti-aliasing prefilter is applied
 //! when shrinking, matching `warpAffine`.
 
+use std::ops::Deref;
+
 use image::{Rgb, RgbImage};
 use nalgebra::Point2;
 use serde::{Deserialize, Serialize};
 
+use crate::RgbBuffer;
 use crate::sample::bilinear_rgb;
 
 /// Default patch side, pixels (the paper's 80x80 keypoint input).
@@ -215,8 +218,8 @@ impl PatchTransform {
 }
 
 /// Cuts the patch for `bbox` out of `image` by the rule in the module docs.
-pub fn crop_patch(
-    image: &RgbImage,
+pub fn crop_patch<C: Deref<Target = [u8]>>(
+    image: &RgbBuffer<C>,
     bbox: &PixelBox,
     params: &CropParams,
 ) -> Result<(RgbImage, PatchTransform), CropError> {

@@ -1,12 +1,19 @@
 //! Bilinear sampling at continuous pixel coordinates (OpenCV convention: pixel `(i, j)` has its
 //! centre at `(i, j)`).
 
-use image::RgbImage;
+use std::ops::Deref;
+
+use crate::RgbBuffer;
 
 /// Samples `image` at the continuous point `(x, y)` by bilinear interpolation of the four
 /// nearest pixel centres. Neighbours outside the image take the value `fill` (OpenCV's
 /// `BORDER_CONSTANT`), so a point half a pixel outside the border blends with `fill`.
-pub fn bilinear_rgb(image: &RgbImage, x: f64, y: f64, fill: [u8; 3]) -> [f32; 3] {
+pub fn bilinear_rgb<C: Deref<Target = [u8]>>(
+    image: &RgbBuffer<C>,
+    x: f64,
+    y: f64,
+    fill: [u8; 3],
+) -> [f32; 3] {
     let (width, height) = (i64::from(image.width()), i64::from(image.height()));
     let x0 = x.floor();
     let y0 = y.floor();
@@ -36,7 +43,7 @@ pub fn bilinear_rgb(image: &RgbImage, x: f64, y: f64, fill: [u8; 3]) -> [f32; 3]
 #[cfg(test)]
 mod tests {
     use super::*;
-    use image::Rgb;
+    use image::{Rgb, RgbImage};
 
     #[test]
     fn samples_pixel_centres_exactly_and_blends_between() {

@@ -19,7 +19,10 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
-use conesight_bus::{FrameEncoding, Stream, declare_publisher, declare_subscriber, publish};
+use conesight_bus::{
+    FrameEncoding, PayloadStorage, Stream, declare_publisher, declare_subscriber, publish,
+    publish_payload, write_payload,
+};
 use conesight_core::{Camera, Extrinsics};
 use conesight_pipeline::boxes::read_boxes;
 use conesight_pipeline::source::{list_images, read_image};
@@ -304,19 +307,17 @@ pub async fn run(
         let started = Instant::now();
         let acquisition_ns = now_ns();
         let header = pb::Header::new(camera_id, sequence, acquisition_ns, frame_id.clone());
-        let image = item.frame.image.clone();
         let encoding = args.common.zenoh.frame_encoding;
         let quality = args.common.zenoh.jpeg_quality;
-        let mut message = tokio::task::block_in_place(|| match encoding {
-            FrameEncoding::Raw => Ok(pb::ImageFrame::from_rgb(header.clone(), &image)),
-            FrameEncoding::Jpeg => pb::ImageFrame::from_rgb_jpeg(header.clone(), &image, quality),
+        let (payload, storage) = tokio::task::block_in_place(|| {
+            frame_payload(&node, header.clone(), &item.frame.image, encoding, quality)
         })?;
-        node.metrics.observe_stage("encode", started.elapsed());
-        if let Some(h) = message.header.as_mut() {
-            h.stamp_publish();
+        if storage == PayloadStorage::SharedMemory {
+            node.metrics.shared_memory_published();
         }
+        node.metrics.observe_stage("encode", started.elapsed());
         let put = Instant::now();
-        if let Err(error) = publish(&frame_publisher, &message).await {
+        if let Err(error) = publish_payload(&frame_publisher, payload).await {
             node.errors.report("publish", &error);
         } else {
             node.metrics.frame_processed();
@@ -405,4 +406,36 @@ pub fn main_from(argv: Vec<std::ffi::OsString>) -> std::process::ExitCode {
             run(&args, frames, node, shutdown).await
         },
     )
+}
+
+/// The bus payload of one frame, its header stamped as published. Raw RGB8 frames are encoded
+/// with their pixels copied once, straight into the session's shared memory when it has a pool
+/// (`conesight_bus::write_payload`); JPEG frames are compressed and encoded as usual.
+fn frame_payload(
+    node: &Node,
+    mut header: pb::Header,
+    image: &image::RgbImage,
+    encoding: FrameEncoding,
+    quality: u8,
+) -> anyhow::Result<(conesight_bus::zenoh::bytes::ZBytes, PayloadStorage)> {
+    match encoding {
+        FrameEncoding::Raw => {
+            header.stamp_publish();
+            let head = pb::ImageFrame::rgb_header_only(header, image.width(), image.height());
+            let pixels = image.as_raw();
+            let len = head.encoded_len_with_pixels(pixels.len());
+            Ok(write_payload(
+                &node.session,
+                len,
+                |mut buf: &mut [u8]| head.encode_with_pixels(pixels, &mut buf),
+            )?)
+        }
+        FrameEncoding::Jpeg => {
+            let mut message = pb::ImageFrame::from_rgb_jpeg(header, image, quality)?;
+            if let Some(h) = message.header.as_mut() {
+                h.stamp_publish();
+            }
+            Ok((conesight_bus::encode(&message), PayloadStorage::Heap))
+        }
+    }
 }

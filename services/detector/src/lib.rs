@@ -1,8 +1,9 @@
 //! # The detector service
 //!
 //! Frames in (`.../<camera>/frame`, newest wins), detections out (`.../<camera>/detections`).
-//! Decoding and inference run on the worker thread `detector`, fed by a slot of 1: while it
-//! works on a frame, a newer frame replaces any waiting one (counted as dropped). The band of
+//! Decoding and inference run on the worker thread `detector`, fed by a slot of 1 straight
+//! from Zenoh's receive thread (`Node::feed_worker`): while it works on a frame, a newer frame
+//! replaces any waiting one (counted as dropped). The band of
 //! the detector follows the horizon of the camera info (`.../<camera>/camera_info`).
 //!
 //! Entry point: [`run`].
@@ -13,7 +14,7 @@ use std::time::Instant;
 
 use conesight_bus::zenoh::Wait;
 use conesight_bus::zenoh::sample::Sample;
-use conesight_bus::{Stream, declare_publisher, declare_subscriber, encode};
+use conesight_bus::{Stream, declare_publisher, encode};
 use conesight_core::Extrinsics;
 use conesight_onnx::ModelOptions;
 use conesight_pipeline::node::{CalibrationCell, CommonArgs, follow_camera_info};
@@ -65,16 +66,8 @@ pub async fn run(args: &DetectorArgs, node: Node, shutdown: Shutdown) -> anyhow:
         tokio::task::spawn_blocking(move || DetectorStage::load(&path, &onnx)).await??;
     let calibration = Arc::new(CalibrationCell::default());
     follow_camera_info(&node, camera, calibration.clone(), &shutdown).await?;
-    let frames = declare_subscriber(
-        &node.session,
-        node.topics.key(camera, Stream::Frame)?,
-        Stream::Frame,
-    )
-    .await?;
     let publisher =
         declare_publisher(&node.session, &node.topics, camera, Stream::Detections).await?;
-    // Ready for input only now: the model is loaded and the subscribers are declared.
-    node.readiness.set_model_loaded(true);
     let limit = args.common.max_message_bytes();
     let worker_node = node.clone();
     let mut seen_calibration = 0_u64;
@@ -92,7 +85,7 @@ pub async fn run(args: &DetectorArgs, node: Node, shutdown: Shutdown) -> anyhow:
                 return;
             }
         };
-        let image = match frame.into_rgb() {
+        let image = match frame.into_shared_rgb() {
             Ok(image) => image,
             Err(error) => {
                 node.metrics.frame_dropped();
@@ -129,17 +122,14 @@ pub async fn run(args: &DetectorArgs, node: Node, shutdown: Shutdown) -> anyhow:
         node.metrics.observe_stage("total", started.elapsed());
         tracing::trace!(detections = detections.len(), "detections published");
     })?;
-    loop {
-        tokio::select! {
-            () = shutdown.wait() => break,
-            sample = frames.recv_async() => {
-                let Ok(sample) = sample else { break };
-                node.metrics.frame_received();
-                node.readiness.mark_input();
-                worker.submit(sample);
-            }
-        }
-    }
+    // Frames go from Zenoh's receive thread straight into the worker's slot (newest wins).
+    let frames = node
+        .feed_worker(node.topics.key(camera, Stream::Frame)?, &worker)
+        .await?;
+    // Ready for input only now: the model is loaded and the subscriber is declared.
+    node.readiness.set_model_loaded(true);
+    shutdown.wait().await;
+    drop(frames);
     if !tokio::task::block_in_place(|| worker.shutdown()) {
         anyhow::bail!("the detector worker panicked");
     }

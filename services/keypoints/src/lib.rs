@@ -20,17 +20,18 @@
 pub mod pairing;
 
 use std::path::PathBuf;
+use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Instant;
 
 use conesight_bus::zenoh::Wait;
 use conesight_bus::zenoh::sample::Sample;
-use conesight_bus::{Stream, declare_publisher, declare_subscriber, encode};
+use conesight_bus::{Stream, declare_callback_subscriber, declare_publisher, encode};
 use conesight_onnx::ModelOptions;
 use conesight_pipeline::keypoint_stage::DEFAULT_MAX_CONES_PER_FRAME;
 use conesight_pipeline::node::CommonArgs;
 use conesight_pipeline::{KeypointStage, Node, Shutdown};
 use conesight_proto::{pb, peek_header, require_header};
-use conesight_service::Worker;
+use conesight_service::{Submitter, Worker};
 
 use crate::pairing::{Paired, Pairing};
 
@@ -91,22 +92,8 @@ pub async fn run(args: &KeypointsArgs, node: Node, shutdown: Shutdown) -> anyhow
         KeypointStage::load(&path, &onnx).map(|stage| stage.with_max_cones(max_cones))
     })
     .await??;
-    let frames = declare_subscriber(
-        &node.session,
-        node.topics.key(camera, Stream::Frame)?,
-        Stream::Frame,
-    )
-    .await?;
-    let detections = declare_subscriber(
-        &node.session,
-        node.topics.key(camera, Stream::Detections)?,
-        Stream::Detections,
-    )
-    .await?;
     let publisher =
         declare_publisher(&node.session, &node.topics, camera, Stream::Keypoints).await?;
-    // Ready for input only now: the model is loaded and the subscribers are declared.
-    node.readiness.set_model_loaded(true);
     let limit = args.common.max_message_bytes();
     let worker_node = node.clone();
     let worker = Worker::spawn(
@@ -118,7 +105,7 @@ pub async fn run(args: &KeypointsArgs, node: Node, shutdown: Shutdown) -> anyhow
             let Some(frame) = node.decode::<pb::ImageFrame>(&sample, limit) else {
                 return;
             };
-            let image = match frame.into_rgb() {
+            let image = match frame.into_shared_rgb() {
                 Ok(image) => image,
                 Err(error) => {
                     node.metrics.frame_dropped();
@@ -173,65 +160,111 @@ pub async fn run(args: &KeypointsArgs, node: Node, shutdown: Shutdown) -> anyhow
             node.metrics.observe_stage("total", started.elapsed());
         },
     )?;
-    let mut pairing: Pairing<Sample, pb::Detections> = Pairing::new(args.pair_cache);
-    loop {
-        tokio::select! {
-            () = shutdown.wait() => break,
-            sample = frames.recv_async() => {
-                let Ok(sample) = sample else { break };
-                if sample.payload().len() > limit {
-                    // Counted and logged by decode.
-                    let _ = node.decode::<pb::ImageFrame>(&sample, limit);
-                    continue;
-                }
-                let header = match peek_header(&sample.payload().to_bytes()) {
-                    Ok(header) => header,
-                    Err(error) => {
-                        node.metrics.frame_dropped();
-                        node.errors.report("malformed_protobuf", &error);
-                        continue;
-                    }
-                };
-                let key = (header.frame_sequence, header.acquisition_time_ns);
-                if let Some(pair) = pairing.add_frame(key, sample) {
-                    node.metrics.frame_received();
-                    node.readiness.mark_input();
-                    worker.submit(pair);
-                }
-            }
-            sample = detections.recv_async() => {
-                let Ok(sample) = sample else { break };
-                let Some(message) = node.decode::<pb::Detections>(&sample, DETECTIONS_LIMIT_BYTES) else {
-                    continue;
-                };
-                let key = match require_header(&message.header) {
-                    Ok(header) => (header.frame_sequence, header.acquisition_time_ns),
-                    Err(error) => {
-                        node.metrics.frame_dropped();
-                        node.errors.report(error.kind(), &error);
-                        continue;
-                    }
-                };
-                match pairing.add_detections(key, message) {
-                    Paired::Ready(frame, message) => {
-                        node.metrics.frame_received();
-                        node.readiness.mark_input();
-                        worker.submit((frame, message));
-                    }
-                    Paired::Waiting { evicted } => {
-                        for _ in 0..evicted {
-                            node.metrics.frame_dropped();
-                            node.errors.report("frame_not_found", &"detections whose frame never arrived were dropped (frame lost or camera too far behind)");
-                        }
-                    }
-                }
-            }
-        }
-    }
+    // Both streams are joined on Zenoh's receive threads and a complete pair goes straight
+    // into the worker's slot (no async task in between).
+    let feed = Arc::new(PairFeed {
+        node: node.clone(),
+        pairing: Mutex::new(Pairing::new(args.pair_cache)),
+        submitter: worker.submitter(),
+        limit,
+    });
+    let frames = {
+        let feed = feed.clone();
+        declare_callback_subscriber(
+            &node.session,
+            node.topics.key(camera, Stream::Frame)?,
+            move |sample| feed.on_frame(sample),
+        )
+        .await?
+    };
+    let detections = {
+        let feed = feed.clone();
+        declare_callback_subscriber(
+            &node.session,
+            node.topics.key(camera, Stream::Detections)?,
+            move |sample| feed.on_detections(sample),
+        )
+        .await?
+    };
+    // Ready for input only now: the model is loaded and the subscribers are declared.
+    node.readiness.set_model_loaded(true);
+    shutdown.wait().await;
+    drop(frames);
+    drop(detections);
     if !tokio::task::block_in_place(|| worker.shutdown()) {
         anyhow::bail!("the keypoints worker panicked");
     }
     Ok(())
+}
+
+/// The joining of frames and detections, called from the subscribers' callbacks.
+struct PairFeed {
+    node: Node,
+    pairing: Mutex<Pairing<Sample, pb::Detections>>,
+    submitter: Submitter<(Sample, pb::Detections)>,
+    limit: usize,
+}
+
+impl PairFeed {
+    fn pairing(&self) -> std::sync::MutexGuard<'_, Pairing<Sample, pb::Detections>> {
+        self.pairing.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    fn on_frame(&self, sample: Sample) {
+        let node = &self.node;
+        if sample.payload().len() > self.limit {
+            // Counted and logged by decode.
+            let _ = node.decode::<pb::ImageFrame>(&sample, self.limit);
+            return;
+        }
+        let header = match peek_header(&sample.payload().to_bytes()) {
+            Ok(header) => header,
+            Err(error) => {
+                node.metrics.frame_dropped();
+                node.errors.report("malformed_protobuf", &error);
+                return;
+            }
+        };
+        let key = (header.frame_sequence, header.acquisition_time_ns);
+        let pair = self.pairing().add_frame(key, sample);
+        if let Some(pair) = pair {
+            node.metrics.frame_received();
+            node.readiness.mark_input();
+            self.submitter.submit(pair);
+        }
+    }
+
+    fn on_detections(&self, sample: Sample) {
+        let node = &self.node;
+        let Some(message) = node.decode::<pb::Detections>(&sample, DETECTIONS_LIMIT_BYTES) else {
+            return;
+        };
+        let key = match require_header(&message.header) {
+            Ok(header) => (header.frame_sequence, header.acquisition_time_ns),
+            Err(error) => {
+                node.metrics.frame_dropped();
+                node.errors.report(error.kind(), &error);
+                return;
+            }
+        };
+        let paired = self.pairing().add_detections(key, message);
+        match paired {
+            Paired::Ready(frame, message) => {
+                node.metrics.frame_received();
+                node.readiness.mark_input();
+                self.submitter.submit((frame, message));
+            }
+            Paired::Waiting { evicted } => {
+                for _ in 0..evicted {
+                    node.metrics.frame_dropped();
+                    node.errors.report(
+                        "frame_not_found",
+                        &"detections whose frame never arrived were dropped (frame lost or camera too far behind)",
+                    );
+                }
+            }
+        }
+    }
 }
 
 /// The `conesight-keypoints` command line.

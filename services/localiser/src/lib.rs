@@ -17,7 +17,7 @@ use std::time::{Duration, Instant};
 
 use conesight_bus::zenoh::Wait;
 use conesight_bus::zenoh::sample::Sample;
-use conesight_bus::{Stream, declare_publisher, declare_subscriber, encode};
+use conesight_bus::{Stream, declare_publisher, encode};
 use conesight_core::Extrinsics;
 use conesight_pipeline::node::{CalibrationCell, CommonArgs, follow_camera_info};
 use conesight_pipeline::{LocaliserStage, Node, Shutdown};
@@ -61,15 +61,7 @@ pub async fn run(args: &LocaliserArgs, node: Node, shutdown: Shutdown) -> anyhow
     };
     let calibration = Arc::new(CalibrationCell::default());
     follow_camera_info(&node, camera, calibration.clone(), &shutdown).await?;
-    let keypoints = declare_subscriber(
-        &node.session,
-        node.topics.key(camera, Stream::Keypoints)?,
-        Stream::Keypoints,
-    )
-    .await?;
     let publisher = declare_publisher(&node.session, &node.topics, camera, Stream::Cones).await?;
-    // Ready for input only now: the model is loaded and the subscribers are declared.
-    node.readiness.set_model_loaded(true);
     let limit = args.common.max_message_bytes().min(KEYPOINTS_LIMIT_BYTES);
     let ground_plane = args.ground_plane;
     let worker_node = node.clone();
@@ -141,17 +133,14 @@ pub async fn run(args: &LocaliserArgs, node: Node, shutdown: Shutdown) -> anyhow
         }
         node.metrics.observe_stage("total", started.elapsed());
     })?;
-    loop {
-        tokio::select! {
-            () = shutdown.wait() => break,
-            sample = keypoints.recv_async() => {
-                let Ok(sample) = sample else { break };
-                node.metrics.frame_received();
-                node.readiness.mark_input();
-                worker.submit(sample);
-            }
-        }
-    }
+    // Keypoints go from Zenoh's receive thread straight into the worker's slot.
+    let keypoints = node
+        .feed_worker(node.topics.key(camera, Stream::Keypoints)?, &worker)
+        .await?;
+    // Ready for input only now: the subscribers are declared.
+    node.readiness.set_model_loaded(true);
+    shutdown.wait().await;
+    drop(keypoints);
     if !tokio::task::block_in_place(|| worker.shutdown()) {
         anyhow::bail!("the localiser worker panicked");
     }

@@ -1,0 +1,117 @@
+//! One bus hop measured alone: two peer sessions in this process on 127.0.0.1 (TCP, shared
+//! memory on), a 1920x1200 RGB8 frame written in place (`write_payload`) and a small message,
+//! published at 10 Hz; prints the time to write the payload, to `put` it, and from `put` to
+//! the subscriber's callback, as p50 / p90 in microseconds.
+//!
+//! ```text
+//! cargo run --release -p conesight-bus --example frame_hop [-- --count 100]
+//! ```
+
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use conesight_bus::zenoh::Wait;
+use conesight_bus::{PayloadStorage, ZenohArgs, open_session, write_payload_infallible};
+
+fn percentile(values: &mut [f64], p: f64) -> f64 {
+    values.sort_by(f64::total_cmp);
+    if values.is_empty() {
+        return f64::NAN;
+    }
+    values[((values.len() - 1) as f64 * p / 100.0).round() as usize]
+}
+
+#[tokio::main]
+async fn main() -> anyhow::Result<()> {
+    let mut count = 100_usize;
+    let mut args = std::env::args().skip(1);
+    while let Some(arg) = args.next() {
+        match arg.as_str() {
+            "--count" => count = args.next().unwrap_or_default().parse()?,
+            other => anyhow::bail!("unknown argument {other}; usage: frame_hop [--count N]"),
+        }
+    }
+    let port = std::net::TcpListener::bind("127.0.0.1:0")?
+        .local_addr()?
+        .port();
+    let endpoint = format!("tcp/127.0.0.1:{port}");
+    let publisher_session = open_session(&ZenohArgs {
+        listen: vec![endpoint.clone()],
+        ..ZenohArgs::default()
+    })
+    .await?;
+    let subscriber_session = open_session(&ZenohArgs {
+        connect: vec![endpoint],
+        listen: vec!["tcp/127.0.0.1:0".to_owned()],
+        ..ZenohArgs::default()
+    })
+    .await?;
+    for (name, bytes) in [
+        ("frame 1920x1200 rgb8", 1920 * 1200 * 3 + 64),
+        ("small 200 B", 200),
+    ] {
+        let received: Arc<Mutex<Option<Instant>>> = Arc::default();
+        let slot = received.clone();
+        let key = format!("conesight/bench/hop/{}", bytes);
+        let _subscriber = subscriber_session
+            .declare_subscriber(key.clone())
+            .callback(move |_sample| {
+                if let Ok(mut at) = slot.lock() {
+                    *at = Some(Instant::now());
+                }
+            })
+            .await
+            .map_err(|e| anyhow::anyhow!("{e}"))?;
+        let publisher = publisher_session
+            .declare_publisher(key)
+            .await
+            .map_err(|e| anyhow::anyhow!("{e}"))?;
+        tokio::time::sleep(Duration::from_millis(500)).await;
+        let (mut write_us, mut put_us, mut hop_us) = (Vec::new(), Vec::new(), Vec::new());
+        let mut in_shm = 0;
+        for i in 0..count + 5 {
+            tokio::time::sleep(Duration::from_millis(100)).await;
+            if let Ok(mut at) = received.lock() {
+                *at = None;
+            }
+            let t0 = Instant::now();
+            let (payload, storage) =
+                write_payload_infallible(&publisher_session, bytes, |buf| buf.fill(i as u8));
+            let t1 = Instant::now();
+            publisher
+                .put(payload)
+                .wait()
+                .map_err(|e| anyhow::anyhow!("{e}"))?;
+            let t2 = Instant::now();
+            let arrived = loop {
+                if let Some(at) = received.lock().ok().and_then(|at| *at) {
+                    break Some(at);
+                }
+                if t2.elapsed() > Duration::from_millis(500) {
+                    break None;
+                }
+                std::thread::yield_now();
+            };
+            if i < 5 {
+                continue;
+            }
+            in_shm += usize::from(storage == PayloadStorage::SharedMemory);
+            write_us.push((t1 - t0).as_secs_f64() * 1e6);
+            put_us.push((t2 - t1).as_secs_f64() * 1e6);
+            if let Some(at) = arrived {
+                hop_us.push(at.saturating_duration_since(t2).as_secs_f64() * 1e6);
+            }
+        }
+        println!(
+            "{name}: write p50 {:.0} us p90 {:.0}; put p50 {:.0} us p90 {:.0}; put -> callback p50 {:.0} us p90 {:.0} ({} of {count} received, {in_shm} in shared memory)",
+            percentile(&mut write_us, 50.0),
+            percentile(&mut write_us, 90.0),
+            percentile(&mut put_us, 50.0),
+            percentile(&mut put_us, 90.0),
+            percentile(&mut hop_us.clone(), 50.0),
+            percentile(&mut hop_us, 90.0),
+            hop_us.len()
+        );
+    }
+    Ok(())
+}
