@@ -11,8 +11,14 @@ from conesight_train.detector.band import BandParams
 from conesight_train.detector.config import TrainConfig
 from conesight_train.detector.data import ToyFrames
 from conesight_train.detector.dataset import DetectorDataset
-from conesight_train.detector.loss import detector_loss
-from conesight_train.detector.model import ConeDetector, DetectorParams, multiply_accumulates
+from conesight_train.detector.loss import LossParams, detector_loss
+from conesight_train.detector.model import (
+    ConeDetector,
+    DetectorParams,
+    ExportHead,
+    multiply_accumulates,
+    peak_scores,
+)
 from conesight_train.detector.onnx_export import compare_with_pytorch, export_onnx
 from conesight_train.detector.train import load_checkpoint, train
 
@@ -62,10 +68,12 @@ def test_training_run_checkpoints_and_resumes(tmp_path):
     assert resumed["history"][:6] == summary["history"]  # the old history is kept, not redone
 
 
-@pytest.mark.parametrize("row_features", [False, True])
-def test_onnx_export_matches_pytorch(tmp_path, row_features):
+@pytest.mark.parametrize(
+    ("row_features", "size_head"), [(False, False), (True, False), (True, True)]
+)
+def test_onnx_export_matches_pytorch(tmp_path, row_features, size_head):
     torch.manual_seed(0)
-    model = ConeDetector(replace(TINY, row_features=row_features)).eval()
+    model = ConeDetector(replace(TINY, row_features=row_features, size_head=size_head)).eval()
     # Non-trivial batch-norm statistics, so the check covers them.
     for m in model.modules():
         if isinstance(m, torch.nn.BatchNorm2d):
@@ -101,3 +109,45 @@ def test_row_features_tell_rows_apart():
 def test_default_network_is_light():
     macs = multiply_accumulates(ConeDetector(), (320, 960))
     assert 50e6 < macs < 1e9
+
+
+def test_size_head_splits_the_orange_family_by_p_large():
+    torch.manual_seed(0)
+    model = ConeDetector(replace(TINY, row_features=True, size_head=True)).eval()
+    assert model.params.heat_channels == 3
+    assert DetectorParams.from_dict(model.params.to_dict()).size_head
+    image = torch.rand(1, 3, 64, 128) * 255
+    with torch.no_grad():
+        heat, reg = model(image)
+        out = ExportHead(model)(image)
+    assert heat.shape[1] == 3 and reg.shape[1] == 5
+    assert out.shape == (1, 8, 16 * 32)
+    family = peak_scores(heat)[:, 2].flatten(1)
+    p_large = torch.sigmoid(reg[:, 4]).flatten(1)
+    torch.testing.assert_close(out[:, 6] + out[:, 7], family)
+    torch.testing.assert_close(out[:, 7], family * p_large)
+    # Old checkpoints (no size_head key) load with the four heatmaps.
+    legacy = {k: v for k, v in TINY.to_dict().items() if k != "size_head"}
+    assert not DetectorParams.from_dict(legacy).size_head
+
+
+def test_size_head_learns_large_from_small_orange_cones():
+    """Toy large cones are taller at the same row: a few steps lower the size loss."""
+    torch.manual_seed(0)
+    torch.set_num_threads(1)
+    frames = ToyFrames(8, seed=4, cones_per_frame=10)
+    data = DetectorDataset(frames, SMALL_BAND)
+    images = torch.stack([data[i][0] for i in range(8)])
+    targets = {k: torch.stack([data[i][1][k] for i in range(8)]) for k in data[0][1]}
+    assert bool((targets["dense_class"] == 3).any()) and bool((targets["dense_class"] == 2).any())
+    model = ConeDetector(replace(TINY, row_features=True, size_head=True))
+    optimizer = torch.optim.Adam(model.parameters(), lr=3e-3)
+    params = LossParams(dense=True)
+    sizes = []
+    for _ in range(40):
+        loss = detector_loss(*model(images), targets, params)
+        optimizer.zero_grad()
+        loss.total.backward()
+        optimizer.step()
+        sizes.append(float(loss.size.detach()))
+    assert np.mean(sizes[-5:]) < 0.6 * np.mean(sizes[:3]), sizes

@@ -22,6 +22,7 @@ import numpy as np
 
 from conesight_train.augment import AugmentParams, photometric
 from conesight_train.detector.band import BandParams, band_to_input
+from conesight_train.detector.cache import ReducedFrame
 from conesight_train.detector.data import LabelledFrame
 
 MIN_VISIBLE_FRACTION = 0.4
@@ -66,13 +67,22 @@ def _clip_boxes(
 
 
 def to_input(
-    frame: LabelledFrame,
+    frame: LabelledFrame | ReducedFrame,
     band: BandParams,
     rng: np.random.Generator | None = None,
     params: DetectorAugmentParams | None = None,
 ) -> InputSample:
-    """The band of `frame` as network input; augmented when `rng` is given."""
-    height, width = frame.image_rgb.shape[:2]
+    """The band of `frame` as network input; augmented when `rng` is given. A `ReducedFrame`
+    (the training cache) is only taken with `rng` (training); see `_reduced_to_input`."""
+    if isinstance(frame, ReducedFrame):
+        height, width = frame.frame_hw
+        if rng is None:
+            raise ValueError(
+                "a cached (reduced) frame is for augmented training only: evaluate on the "
+                "renderer folder, whose full-resolution frames give the exact preprocessing"
+            )
+    else:
+        height, width = frame.image_rgb.shape[:2]
     top = band.top_for(height, frame.band_top_px)
     boxes = frame.boxes_px.astype(np.float64).reshape(-1, 4).copy()
     if rng is None:
@@ -85,6 +95,8 @@ def to_input(
             top,
         )
     p = params or DetectorAugmentParams()
+    if isinstance(frame, ReducedFrame):
+        return _reduced_to_input(frame, band, top, rng, p)
     top = int(
         np.clip(
             top + rng.integers(-p.band_jitter_px, p.band_jitter_px + 1),
@@ -116,6 +128,61 @@ def to_input(
     boxes[:, 0], boxes[:, 2] = xs.min(axis=1), xs.max(axis=1)
     boxes[:, [1, 3]] = boxes[:, [1, 3]] * scale + by
     boxes /= band.factor
+    return InputSample(
+        image,
+        *_clip_boxes(boxes, frame, band.input_width_px, band.input_height_px),
+        top,
+    )
+
+
+def _reduced_to_input(
+    frame: ReducedFrame,
+    band: BandParams,
+    top: int,
+    rng: np.random.Generator,
+    p: DetectorAugmentParams,
+) -> InputSample:
+    """`to_input`'s augmented path on a frame already box-filtered by the band's factor: the
+    same draws and the same continuous mapping, applied at the reduced resolution (the band's
+    top row is kept on a multiple of the factor so an unscaled sample is exactly the
+    inference input's pixels, rounded to uint8 as on the full-resolution path)."""
+    f = band.factor
+    if frame.factor != f:
+        raise ValueError(f"cache factor {frame.factor} does not match the band's factor {f}")
+    height, width = frame.frame_hw
+    top = int(
+        np.clip(
+            top + rng.integers(-p.band_jitter_px, p.band_jitter_px + 1),
+            0,
+            height - band.band_height_px,
+        )
+    )
+    top -= top % f
+    scale = float(rng.uniform(*p.scale_range)) if rng.random() < p.p_scale else 1.0
+    flip = rng.random() < p.p_flip
+    a = -scale if flip else scale
+    bx = width / 2 - a * width / 2
+    # Reduced continuous coordinates u = x / f: u' = a u + bx / f, v' = scale (v - top / f).
+    matrix = np.array(
+        [
+            [a, 0.0, a * 0.5 + bx / f - 0.5],
+            [0.0, scale, scale * 0.5 - scale * top / f - 0.5],
+        ]
+    )
+    reduced = cv2.warpAffine(
+        frame.image_rgb,
+        matrix,
+        (band.input_width_px, band.input_height_px),
+        flags=cv2.INTER_LINEAR,
+        borderMode=cv2.BORDER_REFLECT_101,
+    )
+    image = photometric(reduced, rng, p.photometric)
+    image = np.ascontiguousarray(image.transpose(2, 0, 1), dtype=np.float32)
+    boxes = frame.boxes_px.astype(np.float64).reshape(-1, 4).copy()
+    xs = boxes[:, [0, 2]] * a + bx
+    boxes[:, 0], boxes[:, 2] = xs.min(axis=1), xs.max(axis=1)
+    boxes[:, [1, 3]] = (boxes[:, [1, 3]] - top) * scale
+    boxes /= f
     return InputSample(
         image,
         *_clip_boxes(boxes, frame, band.input_width_px, band.input_height_px),

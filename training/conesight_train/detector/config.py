@@ -15,6 +15,7 @@ import yaml
 
 from conesight_train.detector.band import BandParams
 from conesight_train.detector.data import FrameSource, RendererFrames, ToyFrames
+from conesight_train.detector.loss import LossParams
 from conesight_train.detector.model import DetectorParams
 from conesight_train.detector.postprocess import Thresholds
 
@@ -24,6 +25,9 @@ class TrainConfig:
     """Every setting of a run (defaults: the shipped configuration)."""
 
     train: str = "out/sim-train"
+    # Decoded, box-filtered copy of `train` (detector/cache.py), built on first use; "" reads
+    # the PNGs on every step instead (100 ms per frame).
+    train_cache: str = ""
     val: str = "out/sim-val"
     out: str = "build/train/detector"
     steps: int = 2000
@@ -41,6 +45,7 @@ class TrainConfig:
     band: BandParams = field(default_factory=BandParams)
     model: DetectorParams = field(default_factory=DetectorParams)
     thresholds: Thresholds = field(default_factory=Thresholds)
+    loss: LossParams = field(default_factory=LossParams)
 
     def to_dict(self) -> dict[str, Any]:
         """Plain data for checkpoints and cards."""
@@ -64,6 +69,8 @@ class TrainConfig:
             d["model"] = DetectorParams.from_dict({**DetectorParams().to_dict(), **d["model"]})
         if "thresholds" in d:
             d["thresholds"] = Thresholds(**d["thresholds"])
+        if "loss" in d:
+            d["loss"] = LossParams(**d["loss"])
         return TrainConfig(**d)
 
     @staticmethod

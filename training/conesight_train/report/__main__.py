@@ -118,11 +118,7 @@ def run_keypoint_eval(
 def detection_metrics(records: EvalRecords) -> dict[str, Any]:
     """P/R/mAP@0.5 per class and recall by range on the detector's records, with the training
     evaluation's own code (`conesight_train.detector.metrics.evaluate`)."""
-    from conesight_train.detector.data import (
-        CLASS_NAMES,
-        DIFFICULT_MIN_HEIGHT_PX,
-        DIFFICULT_OCCLUSION,
-    )
+    from conesight_train.detector.data import CLASS_NAMES, is_difficult
     from conesight_train.detector.metrics import ImageResult, evaluate
 
     images = []
@@ -131,8 +127,11 @@ def detection_metrics(records: EvalRecords) -> dict[str, Any]:
         boxes = np.array([t["bbox_px"] for t in truth], np.float64).reshape(-1, 4)
         difficult = np.array(
             [
-                (t["bbox_px"][3] - t["bbox_px"][1]) < DIFFICULT_MIN_HEIGHT_PX
-                or t["occlusion"] > DIFFICULT_OCCLUSION
+                is_difficult(
+                    t["bbox_px"][3] - t["bbox_px"][1],
+                    t["occlusion"],
+                    t.get("truncation", 0.0),
+                )
                 for t in truth
             ],
             bool,

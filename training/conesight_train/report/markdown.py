@@ -135,10 +135,10 @@ def render(results: dict[str, Any]) -> str:
         lines += [
             f"Detector `{det['model']}` at its card's operating score threshold "
             f"{m['score_threshold']:g} for P/R (AP uses every detection down to "
-            f"{det['ap_score_floor']:g}); IoU >= 0.5; difficult cones (under 4 px tall or more "
-            "than 60 % occluded) and cones beyond the 30 m working range count nowhere, nor do "
-            "detections lying mostly on them (`conesight_train.detector.metrics`, as in the "
-            "training evaluation).",
+            f"{det['ap_score_floor']:g}); IoU >= 0.5; difficult cones (under 4 px tall, more "
+            "than 60 % occluded or more than half outside the image) and cones beyond the "
+            "30 m working range count nowhere, nor do detections lying mostly on them "
+            "(`conesight_train.detector.metrics`, as in the training evaluation).",
             "",
             table(
                 ["class", "AP@0.5", "true cones"],
