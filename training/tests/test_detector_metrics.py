@@ -112,3 +112,32 @@ def test_a_loose_box_on_an_ignored_cone_is_not_a_false_positive():
     m = evaluate([image(dets, truths, [0, 0], [5.0, 45.0])], NAMES, 0.5)
     assert m["precision"] == pytest.approx(1 / 2)  # the hit and the background box
     assert m["recall"] == 1.0
+
+
+def test_unmatched_detections_standing_beyond_the_working_range_count_nowhere():
+    truths = [[0, 0, 10, 20], [100, 0, 104, 10]]  # a 5 m cone and a 45 m one
+    # A loose box next to the far cone (neither IoU 0.5 nor mostly on it), and a near miss.
+    dets = [[0, 0, 10, 20, 0.9, 0], [101, 2, 107, 14, 0.9, 0], [300, 0, 304, 10, 0.9, 0]]
+    base = image(dets, truths, [0, 0], [5.0, 45.0])
+    without_ranges = evaluate([base], NAMES, 0.5)
+    assert without_ranges["precision"] == pytest.approx(1 / 3)
+    ranged = ImageResult(
+        base.detections,
+        base.truth_boxes,
+        base.truth_classes,
+        base.truth_range_m,
+        detection_range_m=np.array([5.0, 44.0, 12.0]),
+    )
+    m = evaluate([ranged], NAMES, 0.5)
+    assert m["precision"] == pytest.approx(1 / 2)  # the far loose box is left out, not the 12 m one
+    # A detection matched to an in-range truth stays a hit whatever its own range says.
+    matched = ImageResult(
+        base.detections[:1],
+        base.truth_boxes,
+        base.truth_classes,
+        base.truth_range_m,
+        detection_range_m=np.array([31.0]),
+    )
+    assert evaluate([matched], NAMES, 0.5)["precision"] == 1.0
+    # With no working range nothing is left out.
+    assert evaluate([ranged], NAMES, 0.5, max_range_m=None)["precision"] == pytest.approx(1 / 3)

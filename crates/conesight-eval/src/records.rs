@@ -149,6 +149,41 @@ pub struct DetectionBox {
     pub bbox_px: [f64; 4],
 }
 
+/// A frame's calibration as the detection metrics need it (the flat-ground range of each
+/// detection, `training/conesight_train/detector/ground.py`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct CalibrationRecord {
+    /// OpenCV camera matrix, rows.
+    pub camera_matrix: [[f64; 3]; 3],
+    /// plumb_bob k1, k2, p1, p2, k3.
+    pub distortion: [f64; 5],
+    /// Rotation from OpenCV camera axes to the vehicle frame, rows.
+    pub vehicle_from_camera_rotation: [[f64; 3]; 3],
+    /// The camera's position in the vehicle frame (ground at z = 0), metres.
+    pub vehicle_from_camera_translation_m: [f64; 3],
+}
+
+impl CalibrationRecord {
+    /// The record of a camera and its mounting.
+    pub fn new(camera: &conesight_core::Camera, extrinsics: &conesight_core::Extrinsics) -> Self {
+        let d = &camera.distortion;
+        let r = extrinsics.vehicle_from_camera.rotation.to_rotation_matrix();
+        let t = extrinsics.vehicle_from_camera.translation.vector;
+        Self {
+            camera_matrix: [
+                [camera.fx_px, 0.0, camera.cx_px],
+                [0.0, camera.fy_px, camera.cy_px],
+                [0.0, 0.0, 1.0],
+            ],
+            distortion: [d.k1, d.k2, d.p1, d.p2, d.k3],
+            vehicle_from_camera_rotation: std::array::from_fn(|i| {
+                std::array::from_fn(|j| r.matrix()[(i, j)])
+            }),
+            vehicle_from_camera_translation_m: [t.x, t.y, t.z],
+        }
+    }
+}
+
 /// The detector on one frame, down to the AP score floor.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct DetectionFrameRecord {
@@ -156,6 +191,8 @@ pub struct DetectionFrameRecord {
     pub seed: u64,
     /// Frame index.
     pub index: u64,
+    /// The frame's calibration.
+    pub calibration: CalibrationRecord,
     /// Every visible true cone.
     pub truth: Vec<TruthBox>,
     /// Every detection at or above the score floor.

@@ -33,9 +33,9 @@ use crate::config::{EvalConfig, PatchSet};
 use crate::detection::{AP_SCORE_FLOOR, EvalDetector};
 use crate::perturb::{DrawKey, perturbed_boxes};
 use crate::records::{
-    CameraEntry, DetectionBox, DetectionFrameRecord, GtConeRecord, JsonlWriter, Meta, ModelEntry,
-    PerturbationRecord, PipelineFrameRecord, PipelineMatch, TimingRecord, TruthBox, box_array,
-    points_array,
+    CalibrationRecord, CameraEntry, DetectionBox, DetectionFrameRecord, GtConeRecord, JsonlWriter,
+    Meta, ModelEntry, PerturbationRecord, PipelineFrameRecord, PipelineMatch, TimingRecord,
+    TruthBox, box_array, points_array,
 };
 use crate::variants::Variants;
 
@@ -416,6 +416,7 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Meta> {
             detections_out.write(&DetectionFrameRecord {
                 seed,
                 index,
+                calibration: CalibrationRecord::new(&camera, &extrinsics),
                 truth: truth
                     .cones
                     .iter()

@@ -25,6 +25,7 @@ import yaml
 from conesight_train.data.errors import LabelError
 from conesight_train.data.yolo_txt import read_yolo_txt
 from conesight_train.detector.band import band_top_from, horizon_row_px
+from conesight_train.detector.ground import GroundCamera
 from conesight_train.detector.model import CLASS_NAMES
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
@@ -63,6 +64,7 @@ class LabelledFrame:
     name: str = ""
     difficult: np.ndarray | None = None  # bool [M]; None = none difficult
     band_top_px: int | None = None  # from the frame's calibration (horizon), when known
+    ground: GroundCamera | None = None  # the frame's calibration, when known
 
     def difficult_mask(self) -> np.ndarray:
         """Bool [M]: cones neither trained as positives nor counted by the metrics."""
@@ -148,6 +150,20 @@ def horizon_from_calibration(camera_info: Path, extrinsics: Path) -> float:
     return horizon_row_px(float(k[4]), float(k[5]), vehicle_from_camera.T)
 
 
+def ground_camera_from_calibration(camera_info: Path, extrinsics: Path) -> GroundCamera:
+    """The frame's calibration (renderer format) as a `GroundCamera`."""
+    try:
+        info = yaml.safe_load(camera_info.read_text(encoding="utf-8"))
+        k = np.asarray(info["camera_matrix"]["data"], np.float64).reshape(3, 3)
+        dist = np.asarray(info.get("distortion_coefficients", {}).get("data", [0.0] * 5))
+        pose = yaml.safe_load(extrinsics.read_text(encoding="utf-8"))["vehicle_from_camera"]
+        rotation = vehicle_from_camera_rotation(pose)
+        translation = np.asarray(pose["translation_m"], np.float64).reshape(3)
+    except (OSError, KeyError, TypeError, ValueError, yaml.YAMLError) as err:
+        raise LabelError(extrinsics, f"cannot read the calibration: {err!r}") from err
+    return GroundCamera(k, dist.astype(np.float64), rotation, translation)
+
+
 def read_json_labels(
     path: Path,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, str]:
@@ -215,6 +231,7 @@ class RendererFrames:
         image = read_rgb(image_path)
         height, width = image.shape[:2]
         band_top = None
+        ground = None
         if label_path.suffix == ".json":
             boxes, classes, ranges, difficult, _ = read_json_labels(label_path)
             stem = image_path.stem
@@ -222,6 +239,7 @@ class RendererFrames:
             extrinsics = self.root / "extrinsics" / f"{stem}.yaml"
             if camera_info.is_file() and extrinsics.is_file():
                 band_top = band_top_from(horizon_from_calibration(camera_info, extrinsics))
+                ground = ground_camera_from_calibration(camera_info, extrinsics)
         else:
             yolo = read_yolo_txt(label_path, width, height)
             boxes = (
@@ -233,7 +251,9 @@ class RendererFrames:
             classes = np.array([b.class_id for b in yolo], np.int64)
             ranges = np.full(len(yolo), np.nan)
             difficult = np.zeros(len(yolo), bool)
-        return LabelledFrame(image, boxes, classes, ranges, image_path.stem, difficult, band_top)
+        return LabelledFrame(
+            image, boxes, classes, ranges, image_path.stem, difficult, band_top, ground
+        )
 
 
 def draw_toy_cone(

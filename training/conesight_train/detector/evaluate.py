@@ -34,7 +34,7 @@ from conesight_train.detector.data import IMAGE_SUFFIXES, LabelledFrame, Rendere
 from conesight_train.detector.metrics import WORKING_RANGE_M, ImageResult, evaluate, match
 from conesight_train.detector.model import CLASS_NAMES, ExportHead
 from conesight_train.detector.postprocess import Thresholds
-from conesight_train.detector.predict import detections_in_frame
+from conesight_train.detector.predict import detections_in_frame, frame_result
 
 # Detections down to this score enter the AP computation.
 AP_SCORE_FLOOR = 0.02
@@ -112,9 +112,7 @@ def run_frames(
         sample = to_input(frame, band)
         out = runner(sample.image[None])
         dets = detections_in_frame(out, band, sample.top_px, low)
-        result = ImageResult(
-            dets, frame.boxes_px, frame.classes, frame.range_m, frame.difficult_mask()
-        )
+        result = frame_result(frame, dets)
         results.append(result)
         if png_dir is not None and i < png_count:
             shown = dets[dets[:, 4] >= thresholds.score_threshold]
@@ -173,6 +171,12 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--png-count", type=int, default=1000)
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument(
+        "--count-far-detections",
+        action="store_true",
+        help="count unmatched detections standing beyond the working range as false positives "
+        "(the rule before the flat-ground range of detections; for comparison)",
+    )
+    parser.add_argument(
         "--score-sweep",
         help="comma-separated score thresholds: precision, recall and F1 at each (working range)",
     )
@@ -185,6 +189,8 @@ def main(argv: list[str] | None = None) -> None:
     if args.data:
         source = RendererFrames(args.data, args.limit)
         results = run_frames(source, runner, band, thresholds, args.png, args.png_count)
+        if args.count_far_detections:
+            results = [replace(r, detection_range_m=None) for r in results]
         report: dict[str, object] = evaluate(results, CLASS_NAMES, thresholds.score_threshold)
         report["frames"] = len(results)
         print(f"cones within the {WORKING_RANGE_M:g} m working range:")

@@ -4,7 +4,11 @@ their mean, precision and recall at the operating threshold, and recall by dista
 Matching: per image and class, detections best score first; each takes the unmatched truth of
 its class with the highest IoU >= iou_threshold. Difficult truths (VOC style) and truths beyond
 the working range are matched too, but neither they nor the detections they take count anywhere;
-nor do unmatched detections that lie mostly on such a truth (COCO's ignore-region rule).
+nor do unmatched detections that lie mostly on such a truth (COCO's ignore-region rule), nor,
+when the frame's calibration gives each detection a flat-ground range (`ground.py`), unmatched
+detections standing beyond the working range (nuScenes filters predictions by distance like
+truths): a loose box on a 40 m cone, a few pixels wide, is no false alarm of a detector
+evaluated to 30 m.
 """
 
 from __future__ import annotations
@@ -52,6 +56,8 @@ class ImageResult:
     truth_classes: np.ndarray
     truth_range_m: np.ndarray
     truth_difficult: np.ndarray | None = None
+    # Flat-ground range of each detection's bottom edge [D], when the calibration is known.
+    detection_range_m: np.ndarray | None = None
 
     def difficult(self) -> np.ndarray:
         """Bool [T]."""
@@ -103,7 +109,8 @@ def evaluate(
     distance band (truths with a finite range), all at `iou_threshold`.
 
     Truths beyond `max_range_m` (None: no limit) are left out of AP, P and R like difficult
-    ones, but still get their recall band."""
+    ones, but still get their recall band; so are unmatched detections whose
+    `detection_range_m` is beyond it."""
     per_class: dict[str, dict[str, float]] = {}
     scores_by_class: list[list[np.ndarray]] = [[] for _ in class_names]
     hits_by_class: list[list[np.ndarray]] = [[] for _ in class_names]
@@ -123,6 +130,8 @@ def evaluate(
         # rule for ignore regions): a loose box on a 40 m cone is not a false positive.
         counted = np.ones(len(image.detections), bool)
         counted[matched_by[(matched_by >= 0) & hard]] = False
+        if max_range_m is not None and image.detection_range_m is not None:
+            counted[~hits & (image.detection_range_m >= max_range_m)] = False
         if np.any(hard):
             for d in np.nonzero(~hits)[0]:
                 cover = cover_fraction(image.detections[d, :4], image.truth_boxes[hard])

@@ -8,7 +8,7 @@ import torch
 
 from conesight_train.detector.augment import to_input
 from conesight_train.detector.band import BandParams
-from conesight_train.detector.data import FrameSource
+from conesight_train.detector.data import FrameSource, LabelledFrame
 from conesight_train.detector.metrics import ImageResult
 from conesight_train.detector.model import ConeDetector, ExportHead
 from conesight_train.detector.postprocess import Thresholds, decode
@@ -22,6 +22,17 @@ def detections_in_frame(
     dets[:, :4] *= band.factor
     dets[:, [1, 3]] += top_px
     return dets
+
+
+def frame_result(frame: LabelledFrame, detections: np.ndarray) -> ImageResult:
+    """A frame's detections [D, 6] (frame pixels) with its truths for the metrics, and each
+    detection's flat-ground range when the frame's calibration is known (`ground.py`)."""
+    ranges = None
+    if frame.ground is not None:
+        ranges = frame.ground.box_ranges_m(detections[:, :4])
+    return ImageResult(
+        detections, frame.boxes_px, frame.classes, frame.range_m, frame.difficult_mask(), ranges
+    )
 
 
 def predict_frames(
@@ -42,12 +53,6 @@ def predict_frames(
             outputs = head(torch.from_numpy(inputs)).numpy()
         for frame, sample, output in zip(frames, samples, outputs, strict=True):
             results.append(
-                ImageResult(
-                    detections_in_frame(output, band, sample.top_px, thresholds),
-                    frame.boxes_px,
-                    frame.classes,
-                    frame.range_m,
-                    frame.difficult_mask(),
-                )
+                frame_result(frame, detections_in_frame(output, band, sample.top_px, thresholds))
             )
     return results

@@ -70,6 +70,14 @@ def git(*args: str) -> str:
         return ""
 
 
+def load_average() -> list[float] | None:
+    """The 1, 5 and 15 minute load averages when the report is written (None off Linux)."""
+    try:
+        return [float(v) for v in Path("/proc/loadavg").read_text().split()[:3]]
+    except (OSError, ValueError):
+        return None
+
+
 def machine() -> str:
     """CPU model and core count."""
     model = platform.processor() or platform.machine()
@@ -119,6 +127,7 @@ def detection_metrics(records: EvalRecords) -> dict[str, Any]:
     """P/R/mAP@0.5 per class and recall by range on the detector's records, with the training
     evaluation's own code (`conesight_train.detector.metrics.evaluate`)."""
     from conesight_train.detector.data import CLASS_NAMES, is_difficult
+    from conesight_train.detector.ground import GroundCamera
     from conesight_train.detector.metrics import ImageResult, evaluate
 
     images = []
@@ -139,6 +148,12 @@ def detection_metrics(records: EvalRecords) -> dict[str, Any]:
         dets = np.array(
             [[*d["bbox_px"], d["score"], d["class_id"]] for d in frame["detections"]], np.float64
         ).reshape(-1, 6)
+        calibration = frame.get("calibration")
+        ranges = (
+            GroundCamera.from_dict(calibration).box_ranges_m(dets[:, :4])
+            if calibration is not None
+            else None
+        )
         images.append(
             ImageResult(
                 dets,
@@ -146,6 +161,7 @@ def detection_metrics(records: EvalRecords) -> dict[str, Any]:
                 np.array([t["class_id"] for t in truth], np.int64),
                 np.array([t["range_m"] for t in truth], np.float64),
                 difficult,
+                ranges,
             )
         )
     threshold = float(records.meta["operating_score_threshold"])
@@ -427,6 +443,7 @@ def main(argv: list[str] | None = None) -> int:
             "git_dirty": bool(git("status", "--porcelain", "--", "crates", "training", "models")),
             "date_utc": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
             "machine": machine(),
+            "load_average": load_average(),
             "rust_eval_secs": meta["elapsed_secs"],
             "make_eval_secs": (time.time() - args.started_at) if args.started_at else None,
         },

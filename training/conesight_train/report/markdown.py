@@ -137,7 +137,8 @@ def render(results: dict[str, Any]) -> str:
             f"{m['score_threshold']:g} for P/R (AP uses every detection down to "
             f"{det['ap_score_floor']:g}); IoU >= 0.5; difficult cones (under 4 px tall, more "
             "than 60 % occluded or more than half outside the image) and cones beyond the "
-            "30 m working range count nowhere, nor do detections lying mostly on them "
+            "30 m working range count nowhere, nor do detections lying mostly on them or "
+            "standing (flat-ground range of the box's bottom edge) beyond 30 m "
             "(`conesight_train.detector.metrics`, as in the training evaluation).",
             "",
             table(
@@ -350,9 +351,15 @@ def render(results: dict[str, Any]) -> str:
                 f"{fmt(p['frames_per_s'], 1)} frames/s",
             ],
         ]
+    load = run.get("load_average")
+    load_text = (
+        f"load average {' '.join(f'{v:.2f}' for v in load)} when the report was written"
+        if load
+        else "load average not recorded"
+    )
     lines += [
-        f"{run['machine']}; {ex['frames']} frames, {ex['patches']} patches; the machine was "
-        "shared with training jobs while this ran, so times are upper bounds.",
+        f"{run['machine']}; {ex['frames']} frames, {ex['patches']} patches; {load_text} "
+        "(other jobs on the 2 cores inflate these times: read them as upper bounds).",
         "",
         table(["stage", "p50 ms/frame", "p90 ms/frame", "throughput"], rows),
         "",
