@@ -1,10 +1,11 @@
-//! One bus hop measured alone: two peer sessions in this process on 127.0.0.1 (TCP, shared
-//! memory on), a 1920x1200 RGB8 frame written in place (`write_payload`) and a small message,
-//! published at 10 Hz; prints the time to write the payload, to `put` it, and from `put` to
-//! the subscriber's callback, as p50 / p90 in microseconds.
+//! One bus hop measured alone: a publishing peer session and `--subscribers` subscribing peer
+//! sessions in this process on 127.0.0.1 (TCP, shared memory on), a 1920x1200 RGB8 frame
+//! written in place (`write_payload`) and a small message, published at 10 Hz; prints the time
+//! to write the payload, to `put` it, and from `put` to the first subscriber's callback, as
+//! p50 / p90 in microseconds.
 //!
 //! ```text
-//! cargo run --release -p conesight-bus --example frame_hop [-- --count 100]
+//! cargo run --release -p conesight-bus --example frame_hop [-- --count 100 --subscribers 2]
 //! ```
 
 use std::sync::{Arc, Mutex};
@@ -24,11 +25,15 @@ fn percentile(values: &mut [f64], p: f64) -> f64 {
 #[tokio::main]
 async fn main() -> anyhow::Result<()> {
     let mut count = 100_usize;
+    let mut subscribers = 1_usize;
     let mut args = std::env::args().skip(1);
     while let Some(arg) = args.next() {
         match arg.as_str() {
             "--count" => count = args.next().unwrap_or_default().parse()?,
-            other => anyhow::bail!("unknown argument {other}; usage: frame_hop [--count N]"),
+            "--subscribers" => subscribers = args.next().unwrap_or_default().parse()?,
+            other => anyhow::bail!(
+                "unknown argument {other}; usage: frame_hop [--count N] [--subscribers N]"
+            ),
         }
     }
     let port = std::net::TcpListener::bind("127.0.0.1:0")?
@@ -40,12 +45,17 @@ async fn main() -> anyhow::Result<()> {
         ..ZenohArgs::default()
     })
     .await?;
-    let subscriber_session = open_session(&ZenohArgs {
-        connect: vec![endpoint],
-        listen: vec!["tcp/127.0.0.1:0".to_owned()],
-        ..ZenohArgs::default()
-    })
-    .await?;
+    let mut subscriber_sessions = Vec::new();
+    for _ in 0..subscribers.max(1) {
+        subscriber_sessions.push(
+            open_session(&ZenohArgs {
+                connect: vec![endpoint.clone()],
+                listen: vec!["tcp/127.0.0.1:0".to_owned()],
+                ..ZenohArgs::default()
+            })
+            .await?,
+        );
+    }
     for (name, bytes) in [
         ("frame 1920x1200 rgb8", 1920 * 1200 * 3 + 64),
         ("small 200 B", 200),
@@ -53,15 +63,23 @@ async fn main() -> anyhow::Result<()> {
         let received: Arc<Mutex<Option<Instant>>> = Arc::default();
         let slot = received.clone();
         let key = format!("conesight/bench/hop/{}", bytes);
-        let _subscriber = subscriber_session
-            .declare_subscriber(key.clone())
-            .callback(move |_sample| {
-                if let Ok(mut at) = slot.lock() {
-                    *at = Some(Instant::now());
-                }
-            })
-            .await
-            .map_err(|e| anyhow::anyhow!("{e}"))?;
+        let mut declared = Vec::new();
+        for (i, session) in subscriber_sessions.iter().enumerate() {
+            let slot = slot.clone();
+            declared.push(
+                session
+                    .declare_subscriber(key.clone())
+                    .callback(move |_sample| {
+                        if i == 0
+                            && let Ok(mut at) = slot.lock()
+                        {
+                            *at = Some(Instant::now());
+                        }
+                    })
+                    .await
+                    .map_err(|e| anyhow::anyhow!("{e}"))?,
+            );
+        }
         let publisher = publisher_session
             .declare_publisher(key)
             .await

@@ -432,24 +432,29 @@ pub struct Stamp {
 pub struct StreamLog {
     /// Everything received so far.
     pub stamps: Arc<Mutex<Vec<Stamp>>>,
+    /// The subscriber filling `stamps` (undeclared with the last clone).
+    _subscriber: Option<Arc<conesight_bus::zenoh::pubsub::Subscriber<()>>>,
 }
 
 impl StreamLog {
-    /// Collects `stream` of `camera` on `session`.
+    /// Collects `stream` of `camera` on `session`. Receipt is stamped in the subscriber's
+    /// callback, on Zenoh's receive thread: when the bus delivers the message, not when some
+    /// task of this process gets round to it.
     pub async fn start(
         session: &conesight_bus::zenoh::Session,
         topics: &Topics,
         camera: &str,
         stream: Stream,
     ) -> anyhow::Result<Self> {
-        let subscriber = declare_subscriber(session, topics.key(camera, stream)?, stream).await?;
-        let log = Self::default();
-        let sink = log.stamps.clone();
-        tokio::spawn(async move {
-            while let Ok(sample) = subscriber.recv_async().await {
+        let stamps: Arc<Mutex<Vec<Stamp>>> = Arc::default();
+        let sink = stamps.clone();
+        let subscriber = conesight_bus::declare_callback_subscriber(
+            session,
+            topics.key(camera, stream)?,
+            move |sample| {
                 let received_ns = now_ns();
                 let Ok(header) = conesight_proto::peek_header(&sample.payload().to_bytes()) else {
-                    continue;
+                    return;
                 };
                 if let Ok(mut sink) = sink.lock() {
                     sink.push(Stamp {
@@ -459,9 +464,13 @@ impl StreamLog {
                         received_ns,
                     });
                 }
-            }
-        });
-        Ok(log)
+            },
+        )
+        .await?;
+        Ok(Self {
+            stamps,
+            _subscriber: Some(Arc::new(subscriber)),
+        })
     }
 
     /// Stamps received between `from_ns` and `to_ns`, keyed by (sequence, acquisition).

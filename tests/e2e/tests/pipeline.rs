@@ -20,8 +20,8 @@ const MAX_MEDIAN_RELATIVE_ERROR: f64 = 0.03;
 /// measured recall within 30 m is 0.88 (models/detector.md); 3 frames hold ~60 usable cones,
 /// so a sample's recall moves by several percent around it.
 const MIN_MATCHED_SHARE: f64 = 0.75;
-/// Zenoh's default shared-memory pool, which it locks in memory.
-const ZENOH_SHM_POOL_BYTES: u64 = 16 << 20;
+/// The services' shared-memory pool (conesight's default), which Zenoh locks in memory.
+const ZENOH_SHM_POOL_BYTES: u64 = (conesight_bus::session::DEFAULT_SHM_POOL_MB as u64) << 20;
 /// Largest 90th percentile of the relative error.
 const MAX_P90_RELATIVE_ERROR: f64 = 0.10;
 
