@@ -8,10 +8,11 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 use conesight_bus::zenoh::Session;
+use conesight_bus::zenoh::pubsub::Publisher;
 use conesight_bus::zenoh::qos::{CongestionControl, Priority};
 use conesight_bus::{
-    PayloadStorage, Stream, Topics, ZenohArgs, declare_publisher, declare_subscriber, decode,
-    open_session, publish, publish_payload, write_payload,
+    PayloadStorage, RingSubscriber, Stream, Topics, ZenohArgs, declare_publisher,
+    declare_subscriber, decode, open_session, publish, publish_payload, write_payload,
 };
 use conesight_proto::pb;
 
@@ -52,6 +53,27 @@ async fn two_peers(namespace: &str) -> (Session, Session, Topics) {
     (listener, connector, Topics::from_args(&base).unwrap())
 }
 
+/// A subscriber to every camera's `stream` on one session and a publisher of camera `front` on
+/// the other.
+async fn subscriber_and_publisher(
+    subscriber_session: &Session,
+    publisher_session: &Session,
+    topics: &Topics,
+    stream: Stream,
+) -> (RingSubscriber, Publisher<'static>) {
+    let subscriber = declare_subscriber(
+        subscriber_session,
+        topics.all_cameras(stream).unwrap(),
+        stream,
+    )
+    .await
+    .unwrap();
+    let publisher = declare_publisher(publisher_session, topics, "front", stream)
+        .await
+        .unwrap();
+    (subscriber, publisher)
+}
+
 fn frame(sequence: u64) -> pb::ImageFrame {
     let image = image::RgbImage::from_pixel(64, 48, image::Rgb([sequence as u8, 1, 2]));
     pb::ImageFrame::from_rgb(
@@ -63,16 +85,13 @@ fn frame(sequence: u64) -> pb::ImageFrame {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn two_peers_exchange_detections() {
     let (publisher_session, subscriber_session, topics) = two_peers("test-exchange").await;
-    let subscriber = declare_subscriber(
+    let (subscriber, publisher) = subscriber_and_publisher(
         &subscriber_session,
-        topics.all_cameras(Stream::Detections).unwrap(),
+        &publisher_session,
+        &topics,
         Stream::Detections,
     )
-    .await
-    .unwrap();
-    let publisher = declare_publisher(&publisher_session, &topics, "front", Stream::Detections)
-        .await
-        .unwrap();
+    .await;
     let mut header = pb::Header::new("front", 42, 7, "front_optical");
     header.stamp_publish();
     let message = pb::Detections {
@@ -188,16 +207,13 @@ async fn slow_frame_subscriber_gets_the_newest_frame() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn frames_written_in_place_arrive_in_shared_memory_and_decode_without_a_copy() {
     let (publisher_session, subscriber_session, topics) = two_peers("test-in-place").await;
-    let frames = declare_subscriber(
+    let (frames, publisher) = subscriber_and_publisher(
         &subscriber_session,
-        topics.all_cameras(Stream::Frame).unwrap(),
+        &publisher_session,
+        &topics,
         Stream::Frame,
     )
-    .await
-    .unwrap();
-    let publisher = declare_publisher(&publisher_session, &topics, "front", Stream::Frame)
-        .await
-        .unwrap();
+    .await;
     // The session's pool starts on first use; give it a moment (it may never come: no memlock).
     let started = Instant::now();
     while publisher_session.get_shm_provider().into_option().is_none()
