@@ -52,3 +52,25 @@ def test_round_trip_through_the_dict():
     again = GroundCamera.from_dict(cam.to_dict())
     pts = np.array([[100.0, 900.0], [1800.0, 1100.0]])
     np.testing.assert_allclose(again.ground_range_m(pts), cam.ground_range_m(pts))
+
+
+def test_both_extrinsics_forms_give_the_same_ground(tmp_path):
+    from conesight_train.detector.data import ground_camera_from_calibration
+
+    info = tmp_path / "info.yaml"
+    info.write_text(
+        "camera_matrix: {rows: 3, cols: 3, data: [2047.8, 0, 960, 0, 2047.8, 600, 0, 0, 1]}\n"
+        "distortion_coefficients: {rows: 1, cols: 5, data: [0, 0, 0, 0, 0]}\n"
+    )
+    short = tmp_path / "short.yaml"
+    short.write_text("vehicle_from_camera: {height_m: 1.2, pitch_down_rad: 0.04}\n")
+    full = tmp_path / "full.yaml"
+    full.write_text(
+        "vehicle_from_camera:\n  translation_m: [0.0, 0.0, 1.2]\n"
+        "  rotation: {rpy_rad: [0.0, 0.04, 0.0]}\n"
+    )
+    a = ground_camera_from_calibration(info, short)
+    b = ground_camera_from_calibration(info, full)
+    pixel, expected = project(camera(1.2, 0.04), np.array([15.0, 2.0, 0.0]))
+    assert a.ground_range_m(pixel[None])[0] == pytest.approx(expected, rel=1e-9)
+    assert b.ground_range_m(pixel[None])[0] == pytest.approx(expected, rel=1e-9)

@@ -158,7 +158,10 @@ def ground_camera_from_calibration(camera_info: Path, extrinsics: Path) -> Groun
         dist = np.asarray(info.get("distortion_coefficients", {}).get("data", [0.0] * 5))
         pose = yaml.safe_load(extrinsics.read_text(encoding="utf-8"))["vehicle_from_camera"]
         rotation = vehicle_from_camera_rotation(pose)
-        translation = np.asarray(pose["translation_m"], np.float64).reshape(3)
+        if "height_m" in pose:  # the {height_m, pitch_down_rad} form: above the vehicle origin
+            translation = np.array([0.0, 0.0, float(pose["height_m"])])
+        else:
+            translation = np.asarray(pose["translation_m"], np.float64).reshape(3)
     except (OSError, KeyError, TypeError, ValueError, yaml.YAMLError) as err:
         raise LabelError(extrinsics, f"cannot read the calibration: {err!r}") from err
     return GroundCamera(k, dist.astype(np.float64), rotation, translation)
