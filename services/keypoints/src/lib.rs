@@ -12,7 +12,8 @@
 //! process and crop rule; a frame is needed anyway for any later stage that looks at pixels.
 //!
 //! Frames and detections are joined on (sequence, acquisition time) in [`pairing::Pairing`]
-//! (bounded caches); the frame's header is read without decoding its pixels
+//! (bounded caches that keep the frames the detector is working on, however slow it is); the
+//! frame's header is read without decoding its pixels
 //! ([`conesight_proto::peek_header`]) and the pixels are decoded on the worker thread.
 //!
 //! Entry point: [`run`].
@@ -59,7 +60,9 @@ pub struct KeypointsArgs {
     /// Most cones per frame sent through the network (highest scores kept).
     #[arg(long = "max-cones", default_value_t = DEFAULT_MAX_CONES_PER_FRAME)]
     pub max_cones: usize,
-    /// Frames (and detection messages) kept waiting for their partner.
+    /// Frames (and detection messages) kept waiting for their partner, at least 3: the (up to
+    /// two) frames the detector is probably working on are kept whatever their age, the rest
+    /// are the newest frames (see `pairing`).
     #[arg(long = "pair-cache", default_value_t = DEFAULT_PAIR_CACHE)]
     pub pair_cache: usize,
 }

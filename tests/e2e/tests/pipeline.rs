@@ -281,8 +281,12 @@ async fn overload_and_slow_consumer_keep_memory_bounded_and_frames_fresh() {
         .iter()
         .map(|n| cluster.metric(n, "conesight_frames_dropped_total"))
         .sum();
+    let unpaired = cluster.metric(
+        "keypoints",
+        "conesight_errors_total{kind=\"frame_not_found\"}",
+    );
     println!(
-        "camera published {published} frames; {} cones messages in 10 s ({:.1} Hz); dropped (all services) {dropped}; RSS KiB early {rss_early:?} late {rss_late:?}",
+        "camera published {published} frames; {} cones messages in 10 s ({:.1} Hz); dropped (all services) {dropped}, of them detections whose frame the keypoints service no longer had {unpaired}; RSS KiB early {rss_early:?} late {rss_late:?}",
         late.len(),
         late.len() as f64 / 10.0
     );
