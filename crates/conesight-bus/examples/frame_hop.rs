@@ -1,8 +1,8 @@
 //! One bus hop measured alone: a publishing peer session and `--subscribers` subscribing peer
 //! sessions in this process on 127.0.0.1 (TCP, shared memory on), a 1920x1200 RGB8 frame
-//! written in place (`write_payload`) and a small message, published at 10 Hz; prints the time
-//! to write the payload, to `put` it, and from `put` to the first subscriber's callback, as
-//! p50 / p90 in microseconds.
+//! written in place (`write_payload`) and a small message, each published at 10 Hz with and
+//! without `express`; prints the time to write the payload, to `put` it, and from `put` to the
+//! first subscriber's callback, as p50 / p90 in microseconds.
 //!
 //! ```text
 //! cargo run --release -p conesight-bus --example frame_hop [-- --count 100 --subscribers 2]
@@ -56,38 +56,46 @@ async fn main() -> anyhow::Result<()> {
             .await?,
         );
     }
+    // Each payload with and without `express`, alternating sample by sample (these machines
+    // are noisy: blocks measured one after the other differ more than the two settings).
     for (name, bytes) in [
         ("frame 1920x1200 rgb8", 1920 * 1200 * 3 + 64),
         ("small 200 B", 200),
     ] {
         let received: Arc<Mutex<Option<Instant>>> = Arc::default();
-        let slot = received.clone();
-        let key = format!("conesight/bench/hop/{}", bytes);
         let mut declared = Vec::new();
-        for (i, session) in subscriber_sessions.iter().enumerate() {
-            let slot = slot.clone();
-            declared.push(
-                session
-                    .declare_subscriber(key.clone())
-                    .callback(move |_sample| {
-                        if i == 0
-                            && let Ok(mut at) = slot.lock()
-                        {
-                            *at = Some(Instant::now());
-                        }
-                    })
+        let mut publishers = Vec::new();
+        for express in [false, true] {
+            let key = format!("conesight/bench/hop/{bytes}/{express}");
+            for (i, session) in subscriber_sessions.iter().enumerate() {
+                let slot = received.clone();
+                declared.push(
+                    session
+                        .declare_subscriber(key.clone())
+                        .callback(move |_sample| {
+                            if i == 0
+                                && let Ok(mut at) = slot.lock()
+                            {
+                                *at = Some(Instant::now());
+                            }
+                        })
+                        .await
+                        .map_err(|e| anyhow::anyhow!("{e}"))?,
+                );
+            }
+            publishers.push(
+                publisher_session
+                    .declare_publisher(key)
+                    .express(express)
                     .await
                     .map_err(|e| anyhow::anyhow!("{e}"))?,
             );
         }
-        let publisher = publisher_session
-            .declare_publisher(key)
-            .await
-            .map_err(|e| anyhow::anyhow!("{e}"))?;
         tokio::time::sleep(Duration::from_millis(500)).await;
-        let (mut write_us, mut put_us, mut hop_us) = (Vec::new(), Vec::new(), Vec::new());
+        // [batched, express] each: write, put, put -> callback.
+        let mut times: [[Vec<f64>; 3]; 2] = Default::default();
         let mut in_shm = 0;
-        for i in 0..count + 5 {
+        for i in 0..2 * (count + 5) {
             tokio::time::sleep(Duration::from_millis(100)).await;
             if let Ok(mut at) = received.lock() {
                 *at = None;
@@ -96,7 +104,7 @@ async fn main() -> anyhow::Result<()> {
             let (payload, storage) =
                 write_payload_infallible(&publisher_session, bytes, |buf| buf.fill(i as u8));
             let t1 = Instant::now();
-            publisher
+            publishers[i % 2]
                 .put(payload)
                 .wait()
                 .map_err(|e| anyhow::anyhow!("{e}"))?;
@@ -110,26 +118,30 @@ async fn main() -> anyhow::Result<()> {
                 }
                 std::thread::yield_now();
             };
-            if i < 5 {
+            if i < 10 {
                 continue;
             }
             in_shm += usize::from(storage == PayloadStorage::SharedMemory);
-            write_us.push((t1 - t0).as_secs_f64() * 1e6);
-            put_us.push((t2 - t1).as_secs_f64() * 1e6);
+            let slot = &mut times[i % 2];
+            slot[0].push((t1 - t0).as_secs_f64() * 1e6);
+            slot[1].push((t2 - t1).as_secs_f64() * 1e6);
             if let Some(at) = arrived {
-                hop_us.push(at.saturating_duration_since(t2).as_secs_f64() * 1e6);
+                slot[2].push(at.saturating_duration_since(t2).as_secs_f64() * 1e6);
             }
         }
-        println!(
-            "{name}: write p50 {:.0} us p90 {:.0}; put p50 {:.0} us p90 {:.0}; put -> callback p50 {:.0} us p90 {:.0} ({} of {count} received, {in_shm} in shared memory)",
-            percentile(&mut write_us, 50.0),
-            percentile(&mut write_us, 90.0),
-            percentile(&mut put_us, 50.0),
-            percentile(&mut put_us, 90.0),
-            percentile(&mut hop_us.clone(), 50.0),
-            percentile(&mut hop_us, 90.0),
-            hop_us.len()
-        );
+        for (mode, [write_us, put_us, hop_us]) in ["batched", "express"].iter().zip(&mut times) {
+            println!(
+                "{name}, {mode}: write p50 {:.0} us p90 {:.0}; put p50 {:.0} us p90 {:.0}; put -> callback p50 {:.0} us p90 {:.0} ({} of {count} received)",
+                percentile(write_us, 50.0),
+                percentile(write_us, 90.0),
+                percentile(put_us, 50.0),
+                percentile(put_us, 90.0),
+                percentile(hop_us, 50.0),
+                percentile(hop_us, 90.0),
+                hop_us.len()
+            );
+        }
+        println!("  ({in_shm} of {} payloads in shared memory)", 2 * count);
     }
     Ok(())
 }

@@ -5,6 +5,11 @@
 //! | `frame` | Drop | Data | no | ring of 1: newest frame wins |
 //! | others | Block | RealTime | yes | ring of [`SMALL_MESSAGE_RING`] |
 //!
+//! Frames are not express: a frame has nothing to be batched with, and sending it express
+//! measured the same (`examples/frame_hop.rs`, both alternating sample by sample: put to
+//! callback p50 228 us batched, 216 us express, shared memory, two subscribers); Zenoh's
+//! batching back-off only starts when the transmit queue is contended.
+//!
 //! Subscribers use ring channels only: a slow consumer loses the oldest samples and never
 //! blocks Zenoh's receive path (a FIFO that fills would stall every stream on that link).
 
