@@ -216,6 +216,37 @@ impl Cluster {
         Ok(())
     }
 
+    /// Freezes `name` (SIGSTOP) without ending it: a paused camera publishes nothing, so the
+    /// benchmark can run its in-process blocks between bus blocks on a quiet bus. `resume`
+    /// undoes it. Uses the `kill` command (procps or util-linux; the crate allows no unsafe
+    /// code for a direct `kill(2)`).
+    pub fn pause(&self, name: &str) -> anyhow::Result<()> {
+        self.signal(name, "-STOP")
+    }
+
+    /// Lets a [`Cluster::pause`]d `name` go on (SIGCONT).
+    pub fn resume(&self, name: &str) -> anyhow::Result<()> {
+        self.signal(name, "-CONT")
+    }
+
+    fn signal(&self, name: &str, signal: &str) -> anyhow::Result<()> {
+        let pid = self
+            .pid(name)
+            .with_context(|| format!("{name} is not running"))?;
+        let status = Command::new("kill")
+            .arg(signal)
+            .arg(pid.to_string())
+            .status()
+            .with_context(|| {
+                format!("running `kill {signal} {pid}` for {name} (install procps)")
+            })?;
+        anyhow::ensure!(
+            status.success(),
+            "`kill {signal} {pid}` for {name}: {status}"
+        );
+        Ok(())
+    }
+
     /// Process id of `name`, while running.
     pub fn pid(&self, name: &str) -> Option<u32> {
         self.members.get(name)?.child.as_ref().map(Child::id)
