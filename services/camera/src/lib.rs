@@ -3,7 +3,7 @@
 //! Publishes image frames on `.../<camera>/frame` and the calibration on
 //! `.../<camera>/camera_info` (at start and 4 times a second), from a synthetic sequence
 //! (the renderer driving a track; frames rendered up front with `--preload`, or live) or an
-//! image folder, at `--rate-hz` or, with `--rate-hz 0`, as fast as the pipeline takes them
+//! image folder (decoded when due and cached up to `--cache-mb`: [`FolderFrames`]), at `--rate-hz` or, with `--rate-hz 0`, as fast as the pipeline takes them
 //! (the next frame goes out when the cones of the previous one arrive, or after
 //! `--pace-timeout-ms`).
 //!
@@ -45,6 +45,9 @@ pub enum SourceKind {
 /// a quarter of a second).
 pub const CAMERA_INFO_PERIOD: Duration = Duration::from_millis(250);
 
+/// Default `--cache-mb`: about 150 decoded 1920x1200 frames.
+pub const DEFAULT_CACHE_MB: usize = 1024;
+
 /// Arguments of the camera service.
 #[derive(Debug, Clone, clap::Args)]
 pub struct CameraArgs {
@@ -83,6 +86,11 @@ pub struct CameraArgs {
     /// frame); 0 renders every frame live.
     #[arg(long, env = "CONESIGHT_PRELOAD", default_value_t = 20)]
     pub preload: u64,
+    /// With `--source folder`: decoded images kept for the next loops while they fit in this
+    /// many MiB (a 1920x1200 frame is 6.6 MiB); the images of a larger folder are decoded
+    /// again on every loop, so memory stays bounded whatever the folder's size.
+    #[arg(long = "cache-mb", env = "CONESIGHT_CACHE_MB", default_value_t = DEFAULT_CACHE_MB)]
+    pub cache_mb: usize,
     /// Frames per second; 0 publishes as fast as the pipeline takes them.
     #[arg(long = "rate-hz", env = "CONESIGHT_RATE_HZ", default_value_t = 10.0)]
     pub rate_hz: f64,
@@ -113,6 +121,7 @@ impl CameraArgs {
             speed_mps: 5.0,
             no_effects: false,
             preload: 20,
+            cache_mb: DEFAULT_CACHE_MB,
             rate_hz: 10.0,
             pace_timeout_ms: 1000,
             frames: 0,
@@ -148,6 +157,170 @@ pub enum Frames {
     Preloaded(Arc<Vec<CameraFrame>>),
     /// Rendered on demand.
     Live(Box<SyntheticSource>),
+    /// An image folder, decoded when due ([`FolderFrames`]).
+    Folder(Box<FolderFrames>),
+}
+
+/// The images of a folder, in name order, looped. Listed at start; each image is decoded when
+/// it is first due (the one after it is decoded ahead on a blocking thread meanwhile) and kept
+/// for the next loops while the decoded frames fit in the cache budget, so the first frame goes
+/// out after one decode and a folder of any size runs in bounded memory. An unreadable image
+/// (or label file, with `--publish-boxes`) is logged and skipped on every loop.
+#[derive(Debug)]
+pub struct FolderFrames {
+    dir: PathBuf,
+    paths: Vec<PathBuf>,
+    camera: Camera,
+    extrinsics: Extrinsics,
+    /// Where the label files are, with `--publish-boxes`.
+    labels: Option<PathBuf>,
+    budget_bytes: usize,
+    state: tokio::sync::Mutex<FolderState>,
+}
+
+#[derive(Debug, Default)]
+struct FolderState {
+    cache: Vec<Option<CameraFrame>>,
+    cached_bytes: usize,
+    unreadable: Vec<bool>,
+    /// The image being decoded ahead: (index, task).
+    ahead: Option<(usize, tokio::task::JoinHandle<anyhow::Result<CameraFrame>>)>,
+}
+
+/// Decodes image `index` of a folder (and its labels when `labels` is set).
+fn read_folder_frame(
+    index: usize,
+    path: PathBuf,
+    camera: Camera,
+    extrinsics: Extrinsics,
+    labels: Option<PathBuf>,
+) -> anyhow::Result<CameraFrame> {
+    let image = read_image(&path)?;
+    let boxes = match labels {
+        Some(dir) => read_boxes(
+            &dir.join(path.with_extension("txt").file_name().unwrap_or_default()),
+            image.width(),
+            image.height(),
+        )?,
+        None => Vec::new(),
+    };
+    Ok(CameraFrame {
+        frame: SourceFrame {
+            index: index as u64,
+            name: path.display().to_string(),
+            image: Arc::new(image),
+            camera,
+            extrinsics,
+            truth: None,
+        },
+        boxes,
+    })
+}
+
+impl FolderFrames {
+    /// The images of `dir` (at least one file with an image extension), decoded later.
+    pub fn new(
+        dir: &std::path::Path,
+        camera: Camera,
+        extrinsics: Extrinsics,
+        labels: Option<PathBuf>,
+        cache_mb: usize,
+    ) -> anyhow::Result<Self> {
+        let paths = list_images(dir)?;
+        anyhow::ensure!(
+            !paths.is_empty(),
+            "no image file (png, jpg, ...) in {}",
+            dir.display()
+        );
+        let state = FolderState {
+            cache: vec![None; paths.len()],
+            unreadable: vec![false; paths.len()],
+            ..FolderState::default()
+        };
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            paths,
+            camera,
+            extrinsics,
+            labels,
+            budget_bytes: cache_mb.saturating_mul(1 << 20),
+            state: tokio::sync::Mutex::new(state),
+        })
+    }
+
+    /// Number of image files listed.
+    pub fn len(&self) -> usize {
+        self.paths.len()
+    }
+
+    /// True when no file is listed (never: [`FolderFrames::new`] refuses an empty folder).
+    pub fn is_empty(&self) -> bool {
+        self.paths.is_empty()
+    }
+
+    /// Decoded frames kept for the next loops.
+    pub async fn cached(&self) -> usize {
+        self.state.lock().await.cache.iter().flatten().count()
+    }
+
+    fn decode(&self, index: usize) -> tokio::task::JoinHandle<anyhow::Result<CameraFrame>> {
+        let (path, camera, extrinsics, labels) = (
+            self.paths[index].clone(),
+            self.camera,
+            self.extrinsics,
+            self.labels.clone(),
+        );
+        tokio::task::spawn_blocking(move || {
+            read_folder_frame(index, path, camera, extrinsics, labels)
+        })
+    }
+
+    /// The frame published as `sequence` (the next readable image from `sequence` on).
+    async fn get(&self, sequence: u64) -> anyhow::Result<CameraFrame> {
+        let count = self.paths.len();
+        let mut state = self.state.lock().await;
+        for step in 0..count {
+            let index = ((sequence + step as u64) % count as u64) as usize;
+            if state.unreadable[index] {
+                continue;
+            }
+            let frame = if let Some(frame) = state.cache[index].clone() {
+                frame
+            } else {
+                let task = match state.ahead.take() {
+                    Some((ahead, task)) if ahead == index => task,
+                    other => {
+                        if let Some((_, stale)) = other {
+                            stale.abort();
+                        }
+                        self.decode(index)
+                    }
+                };
+                match task.await? {
+                    Ok(frame) => {
+                        let bytes = frame.frame.image.as_raw().len();
+                        if state.cached_bytes + bytes <= self.budget_bytes {
+                            state.cached_bytes += bytes;
+                            state.cache[index] = Some(frame.clone());
+                        }
+                        frame
+                    }
+                    Err(error) => {
+                        tracing::warn!(error = format!("{error:#}"), "skipping image");
+                        state.unreadable[index] = true;
+                        continue;
+                    }
+                }
+            };
+            // Decode the next image meanwhile, unless it is cached or known unreadable.
+            let next = (index + 1) % count;
+            if state.cache[next].is_none() && !state.unreadable[next] && state.ahead.is_none() {
+                state.ahead = Some((next, self.decode(next)));
+            }
+            return Ok(frame);
+        }
+        anyhow::bail!("no readable image in {}", self.dir.display())
+    }
 }
 
 /// The frames of `args`: a preloaded synthetic sequence (progress bar on stderr when
@@ -184,39 +357,16 @@ fn load_frames_blocking(args: &CameraArgs, progress: bool) -> anyhow::Result<Fra
                 Some(path) => Extrinsics::from_yaml_file(path)?,
                 None => Extrinsics::paper_default(),
             };
-            let mut frames = Vec::new();
-            for (index, path) in list_images(dir)?.into_iter().enumerate() {
-                let image = match read_image(&path) {
-                    Ok(image) => image,
-                    Err(error) => {
-                        tracing::warn!(%error, "skipping image");
-                        continue;
-                    }
-                };
-                let boxes = if args.publish_boxes {
-                    let labels = args
-                        .boxes_dir
-                        .as_deref()
-                        .unwrap_or(dir.as_path())
-                        .join(path.with_extension("txt").file_name().unwrap_or_default());
-                    read_boxes(&labels, image.width(), image.height())?
-                } else {
-                    Vec::new()
-                };
-                frames.push(CameraFrame {
-                    frame: SourceFrame {
-                        index: index as u64,
-                        name: path.display().to_string(),
-                        image: Arc::new(image),
-                        camera,
-                        extrinsics,
-                        truth: None,
-                    },
-                    boxes,
-                });
-            }
-            anyhow::ensure!(!frames.is_empty(), "no readable image in {}", dir.display());
-            Ok(Frames::Preloaded(Arc::new(frames)))
+            let labels = args
+                .publish_boxes
+                .then(|| args.boxes_dir.clone().unwrap_or_else(|| dir.clone()));
+            Ok(Frames::Folder(Box::new(FolderFrames::new(
+                dir,
+                camera,
+                extrinsics,
+                labels,
+                args.cache_mb,
+            )?)))
         }
     }
 }
@@ -243,6 +393,7 @@ impl Frames {
                 let frame = tokio::task::block_in_place(|| source.frame(sequence))?;
                 Ok(with_truth_boxes(frame))
             }
+            Self::Folder(folder) => folder.get(sequence).await,
         }
     }
 }
@@ -437,5 +588,84 @@ fn frame_payload(
             }
             Ok((conesight_bus::encode(&message), PayloadStorage::Heap))
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A folder of `good` small PNGs named 0.png, 1.png, ... and one file that is not an image.
+    fn folder(name: &str, good: usize) -> PathBuf {
+        let dir =
+            std::env::temp_dir().join(format!("conesight-camera-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        for i in 0..good {
+            image::RgbImage::from_pixel(8, 6, image::Rgb([i as u8, 0, 0]))
+                .save(dir.join(format!("{i}.png")))
+                .unwrap();
+        }
+        std::fs::write(dir.join(format!("{good}.png")), b"not a png").unwrap();
+        dir
+    }
+
+    fn open(dir: &std::path::Path, cache_mb: usize) -> FolderFrames {
+        FolderFrames::new(
+            dir,
+            Camera::paper_default(),
+            Extrinsics::paper_default(),
+            None,
+            cache_mb,
+        )
+        .unwrap()
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn folder_frames_loop_skip_unreadable_files_and_cache_within_budget() {
+        let dir = folder("loop", 3);
+        let frames = open(&dir, 1);
+        assert_eq!(frames.len(), 4);
+        assert_eq!(frames.cached().await, 0, "nothing is decoded up front");
+        let mut seen = Vec::new();
+        for sequence in 0..8 {
+            let frame = frames.get(sequence).await.unwrap();
+            seen.push(frame.frame.index);
+            assert_eq!(
+                frame.frame.image.get_pixel(0, 0)[0] as u64,
+                frame.frame.index
+            );
+        }
+        // Sequence 3 is the broken file: its turn goes to the next readable image.
+        assert_eq!(seen, vec![0, 1, 2, 0, 0, 1, 2, 0]);
+        assert_eq!(frames.cached().await, 3);
+
+        // A budget of 0 keeps nothing: every loop decodes again (memory stays bounded).
+        let uncached = open(&dir, 0);
+        for sequence in 0..6 {
+            assert!(uncached.get(sequence).await.is_ok());
+        }
+        assert_eq!(uncached.cached().await, 0);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn empty_or_unreadable_folders_are_clear_errors() {
+        let dir = folder("bad", 0);
+        let frames = open(&dir, 1);
+        let error = frames.get(0).await.unwrap_err().to_string();
+        assert!(error.contains("no readable image"), "{error}");
+        std::fs::remove_file(dir.join("0.png")).unwrap();
+        let error = FolderFrames::new(
+            &dir,
+            Camera::paper_default(),
+            Extrinsics::paper_default(),
+            None,
+            1,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(error.contains("no image file"), "{error}");
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

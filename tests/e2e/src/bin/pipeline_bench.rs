@@ -28,7 +28,8 @@ use conesight_proto::now_ns;
 
 /// Camera rates of the sweep, Hz.
 const RATES_HZ: [f64; 7] = [2.0, 5.0, 8.0, 10.0, 12.0, 15.0, 20.0];
-/// Seconds at the start of each rate that are not measured (start-up, pipeline filling).
+/// Seconds at the start of each rate that are not measured (start-up, pipeline filling; at
+/// least one loop over the frames).
 const WARM_UP_SECS: f64 = 2.0;
 /// Bus and in-process blocks alternated at each rate: bus, in-process, bus, ... each
 /// `--seconds / ROUNDS` long, so a drift of the machine (these machines are noisy) falls on
@@ -278,7 +279,10 @@ async fn main() -> anyhow::Result<()> {
         cluster.set_args("camera", camera_args(rate));
         cluster.spawn("camera")?;
         let start = Instant::now();
-        tokio::time::sleep(Duration::from_secs_f64(WARM_UP_SECS)).await;
+        // At least one loop over the frames before measuring: the camera decodes each image
+        // when it is first due and keeps it.
+        let warm_up = WARM_UP_SECS.max(frames as f64 / rate + 0.5);
+        tokio::time::sleep(Duration::from_secs_f64(warm_up)).await;
         // Bus and in-process blocks alternate at the same rate, so both see the same machine;
         // the camera is paused (not restarted) during the in-process blocks, so the services
         // sit idle then, like the in-process pipeline between its frames.
