@@ -84,6 +84,11 @@ impl ByFrame {
         }
     }
 
+    /// Every latency, whichever frame.
+    fn all(&self) -> Vec<f64> {
+        self.0.concat()
+    }
+
     fn extend(&mut self, other: &Self) {
         for (mine, theirs) in self.0.iter_mut().zip(&other.0) {
             mine.extend(theirs);
@@ -269,7 +274,6 @@ async fn main() -> anyhow::Result<()> {
     let mut rows: Vec<RateRow> = Vec::new();
     let (mut camera_stage_sums, mut camera_stage_counts) = ([0.0_f64; 2], [0.0_f64; 2]);
     let (mut published_shm, mut published) = (0.0_f64, 0.0_f64);
-    let mut paced_total: Vec<Vec<f64>> = Vec::new();
     let mut paced_frames: Vec<ByFrame> = Vec::new();
     let frames = fixture.frames.len();
     for rate in RATES_HZ {
@@ -323,7 +327,6 @@ async fn main() -> anyhow::Result<()> {
         for (index, ms) in &paced {
             paced_by_frame.push(*index, *ms);
         }
-        paced_total.push(paced.iter().map(|(_, ms)| *ms).collect());
         paced_frames.push(paced_by_frame);
         let mut cones = std::collections::BTreeMap::new();
         let (mut dets, mut kps) = (cones.clone(), cones.clone());
@@ -463,9 +466,9 @@ async fn main() -> anyhow::Result<()> {
     // (rate, bus ms, in-process ms, ratio) frame-matched, and the plain p50 / p50 ratio.
     let mut ratios: Vec<(f64, f64, f64, f64, f64)> = Vec::new();
     let (mut bus_pooled, mut paced_pooled) = (ByFrame::new(frames), ByFrame::new(frames));
-    for ((row, paced), paced_by_frame) in rows.iter().zip(&paced_total).zip(&paced_frames) {
+    for (row, paced_by_frame) in rows.iter().zip(&paced_frames) {
         let p50 = median(&row.e2e).unwrap_or(f64::NAN);
-        let reference = median(paced).unwrap_or(f64::NAN);
+        let reference = median(&paced_by_frame.all()).unwrap_or(f64::NAN);
         let (bus, matched_reference) = row
             .by_frame
             .matched(paced_by_frame)
