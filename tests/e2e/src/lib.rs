@@ -22,6 +22,15 @@ use conesight_pipeline::{
 };
 use conesight_proto::{LocatedCone, now_ns, pb};
 
+/// Held by every test that starts a [`Cluster`], so the tests of one binary (which cargo runs
+/// in parallel) run their clusters one after another: on two cores, a restart timed while two
+/// other clusters (one of them at a 3x overload) share the CPU measures the neighbours, not the
+/// pipeline.
+pub async fn one_cluster_at_a_time() -> tokio::sync::MutexGuard<'static, ()> {
+    static CLUSTERS: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
+    CLUSTERS.lock().await
+}
+
 /// A free TCP port on 127.0.0.1 (bound and released; good enough for tests).
 pub fn free_port() -> anyhow::Result<u16> {
     Ok(std::net::TcpListener::bind("127.0.0.1:0")?

@@ -7,7 +7,9 @@
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-use conesight_e2e::{Cluster, Fixture, Observer, Received, memory_lockable, trained_detector};
+use conesight_e2e::{
+    Cluster, Fixture, Observer, Received, memory_lockable, one_cluster_at_a_time, trained_detector,
+};
 use conesight_pipeline::match_cones;
 use conesight_pipeline::stats::{median, percentile};
 
@@ -139,6 +141,7 @@ fn assert_within_model_accuracy(fixture: &Fixture, received: &[Received], what: 
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn frames_in_cones_out_within_model_accuracy_then_restart_each_service() {
+    let _one_at_a_time = one_cluster_at_a_time().await;
     let fixture = Fixture::render("e2e", 3).unwrap();
     let mut cluster = cluster(&fixture, "e2e-main", 5.0, &[], &[]);
     let (observer, received) = start_and_collect(&mut cluster, 12).await;
@@ -177,6 +180,15 @@ async fn frames_in_cones_out_within_model_accuracy_then_restart_each_service() {
         let restarted = Instant::now();
         let restarted_ns = conesight_proto::now_ns();
         cluster.spawn(name).unwrap();
+        // When it answers HTTP (its Zenoh session is open; models load after).
+        let mut up = None;
+        while up.is_none() && restarted.elapsed() < Duration::from_secs(10) {
+            if matches!(cluster.http(name, "/livez"), Ok((200, _))) {
+                up = Some(restarted.elapsed());
+            } else {
+                tokio::time::sleep(Duration::from_millis(10)).await;
+            }
+        }
         let resumed = observer
             .wait_for(Duration::from_secs(10), |r| {
                 r.iter().any(|m| m.acquisition_ns > restarted_ns)
@@ -184,7 +196,8 @@ async fn frames_in_cones_out_within_model_accuracy_then_restart_each_service() {
             .await;
         let took = restarted.elapsed();
         println!(
-            "{name}: killed, restarted, cones again after {:.2} s",
+            "{name}: killed, restarted, up after {:.2} s, cones again after {:.2} s",
+            up.unwrap_or_default().as_secs_f64(),
             took.as_secs_f64()
         );
         assert!(resumed, "{name}: no cones within 10 s of the restart");
@@ -206,6 +219,7 @@ async fn frames_in_cones_out_within_model_accuracy_then_restart_each_service() {
 /// through the TCP socket, as between a Jetson and the main PC).
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn jpeg_frames_through_the_socket_as_between_hosts() {
+    let _one_at_a_time = one_cluster_at_a_time().await;
     let fixture = Fixture::render("jpeg", 2).unwrap();
     let mut cluster = cluster(
         &fixture,
@@ -224,6 +238,7 @@ async fn jpeg_frames_through_the_socket_as_between_hosts() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn overload_and_slow_consumer_keep_memory_bounded_and_frames_fresh() {
+    let _one_at_a_time = one_cluster_at_a_time().await;
     let fixture = Fixture::render("overload", 2).unwrap();
     // 30 Hz is 3x the 10 Hz target.
     let mut cluster = cluster(&fixture, "e2e-overload", 30.0, &[], &[]);
