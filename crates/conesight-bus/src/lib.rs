@@ -15,7 +15,9 @@
 //! - [`codec`]: the one [`encode`] / [`decode`] pair (protobuf, with a size limit; `bytes`
 //!   fields such as a frame's pixels are decoded without a copy).
 //! - [`payload`]: [`write_payload`], a large payload written once, into the session's shared
-//!   memory when it has a pool (how the camera publishes raw frames).
+//!   memory when it has a pool (how the camera publishes raw frames); [`PixelSlice`], pixels
+//!   kept in the pool and published again behind new headers without a copy (looped frames);
+//!   [`in_shared_memory`].
 //! - [`error`]: [`BusError`] and [`DecodeError`].
 //!
 //! Entry point: `open_session(&args).await`, then `Topics::from_args(&args)?` and
@@ -30,14 +32,18 @@ pub mod session;
 pub mod topics;
 
 pub use args::{FrameEncoding, ZenohArgs, ZenohMode};
-pub use codec::{DEFAULT_MAX_MESSAGE_BYTES, decode, decode_with_limit, encode, payload_bytes};
+pub use codec::{
+    DEFAULT_MAX_MESSAGE_BYTES, PayloadBuf, decode, decode_with_limit, encode, payload_buf,
+};
 pub use error::{BusError, DecodeError};
-pub use payload::{PayloadStorage, write_payload, write_payload_infallible};
+pub use payload::{
+    PayloadStorage, PixelSlice, in_shared_memory, write_payload, write_payload_infallible,
+};
 pub use qos::{
     RingSubscriber, StreamQos, declare_callback_subscriber, declare_publisher, declare_subscriber,
     publish, publish_payload,
 };
-pub use session::{open_session, zenoh_config};
+pub use session::{open_session, shm_pool_bytes, zenoh_config};
 pub use topics::{Stream, Topics};
 
 /// The Zenoh crate, re-exported so services use the same version.

@@ -4,14 +4,15 @@
 //! publisher's buffer itself, and `crate::codec::decode_with_limit` slices the pixels out of it
 //! without a copy. When the pool is missing (shared memory off, still initialising, or
 //! unavailable, e.g. no memlock allowance) or full, the payload goes to the heap and Zenoh
-//! sends it over the socket.
+//! sends it over the socket. Pixels published again and again (a looped frame) are written
+//! once and kept in the pool ([`PixelSlice`]): each publish then costs a header.
 
 use std::convert::Infallible;
 
 use zenoh::Session;
 use zenoh::Wait;
 use zenoh::bytes::ZBytes;
-use zenoh::shm::GarbageCollect;
+use zenoh::shm::{GarbageCollect, ZShm};
 
 /// Where a payload from [`write_payload`] was written.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -53,5 +54,58 @@ pub fn write_payload_infallible(
     match result {
         Ok(payload) => payload,
         Err(never) => match never {},
+    }
+}
+
+/// Whether any slice of `payload` is in shared memory: a payload written whole into the pool
+/// ([`write_payload`]) or a cached frame's pixels after its header ([`PixelSlice`]).
+pub fn in_shared_memory(payload: &ZBytes) -> bool {
+    if payload.as_shm().is_some() {
+        return true;
+    }
+    let zbuf = zenoh_buffers::ZBuf::from(payload.clone());
+    zbuf.zslices()
+        .any(|slice| slice.downcast_ref::<zenoh_shm::ShmBufInner>().is_some())
+}
+
+/// A large immutable part of a message (a frame's pixels) written once into a buffer of the
+/// session's shared-memory pool and published again and again without a copy: each payload is
+/// a small slice of its own (the header, which changes) followed by this buffer
+/// ([`PixelSlice::payload`]). A camera looping over cached frames keeps one per frame, so a
+/// frame costs a header, not a 6.9 MB copy. Receivers must not change it (nothing here does:
+/// decoded frames are read-only views).
+#[derive(Debug, Clone)]
+pub struct PixelSlice(ZShm);
+
+impl PixelSlice {
+    /// `data` copied into a new buffer of `session`'s pool, when it has one with room for it
+    /// (the caller keeps count of what it holds against [`shm_pool_bytes`]).
+    pub fn write(session: &Session, data: &[u8]) -> Option<Self> {
+        let provider = session.get_shm_provider().into_option()?;
+        let mut buffer = provider
+            .alloc(data.len())
+            .with_policy::<GarbageCollect>()
+            .wait()
+            .ok()?;
+        buffer.copy_from_slice(data);
+        Some(Self(ZShm::from(buffer)))
+    }
+
+    /// Bytes held.
+    pub fn len(&self) -> usize {
+        self.0.len()
+    }
+
+    /// True when empty.
+    pub fn is_empty(&self) -> bool {
+        self.0.is_empty()
+    }
+
+    /// `head` followed by this buffer, without copying it.
+    pub fn payload(&self, head: Vec<u8>) -> ZBytes {
+        let mut writer = ZBytes::writer();
+        writer.append(ZBytes::from(head));
+        writer.append(ZBytes::from(self.0.clone()));
+        writer.finish()
     }
 }

@@ -68,6 +68,19 @@ pub fn zenoh_config(args: &ZenohArgs) -> Result<Config, BusError> {
     Ok(config)
 }
 
+/// Size of the shared-memory pool a session of `args` gets, bytes (the config file's or the
+/// flags' `transport/shared_memory/transport_optimization/pool_size`); `None` when it cannot be
+/// read.
+pub fn shm_pool_bytes(args: &ZenohArgs) -> Option<usize> {
+    let config = zenoh_config(args).ok()?;
+    config
+        .get_json("transport/shared_memory/transport_optimization/pool_size")
+        .ok()?
+        .trim_matches('"')
+        .parse()
+        .ok()
+}
+
 /// Opens the session described by `args`.
 pub async fn open_session(args: &ZenohArgs) -> Result<Session, BusError> {
     let config = zenoh_config(args)?;
@@ -104,6 +117,19 @@ mod tests {
 
     fn get(config: &Config, key: &str) -> String {
         config.get_json(key).unwrap()
+    }
+
+    #[test]
+    fn the_pool_size_is_read_back() {
+        assert_eq!(
+            shm_pool_bytes(&ZenohArgs::default()),
+            Some(DEFAULT_SHM_POOL_MB << 20)
+        );
+        let args = ZenohArgs {
+            shm_pool_mb: Some(9),
+            ..ZenohArgs::default()
+        };
+        assert_eq!(shm_pool_bytes(&args), Some(9 << 20));
     }
 
     #[test]

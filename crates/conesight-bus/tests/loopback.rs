@@ -11,8 +11,9 @@ use conesight_bus::zenoh::Session;
 use conesight_bus::zenoh::pubsub::Publisher;
 use conesight_bus::zenoh::qos::{CongestionControl, Priority};
 use conesight_bus::{
-    PayloadStorage, RingSubscriber, Stream, Topics, ZenohArgs, declare_publisher,
-    declare_subscriber, decode, open_session, publish, publish_payload, write_payload,
+    PayloadStorage, PixelSlice, RingSubscriber, Stream, Topics, ZenohArgs, declare_publisher,
+    declare_subscriber, decode, in_shared_memory, open_session, publish, publish_payload,
+    write_payload,
 };
 use conesight_proto::pb;
 
@@ -263,6 +264,74 @@ async fn frames_written_in_place_arrive_in_shared_memory_and_decode_without_a_co
              allowance of the pool size, or CAP_IPC_LOCK)"
         );
     }
+    publisher_session.close().await.unwrap();
+    subscriber_session.close().await.unwrap();
+}
+
+/// Kept pixels (a looped frame's buffer in the pool) published twice under two headers: both
+/// arrive with their own header, the pixels in shared memory and decoded without a copy.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn kept_pixels_are_published_again_under_new_headers_without_a_copy() {
+    let (publisher_session, subscriber_session, topics) = two_peers("test-kept").await;
+    let (frames, publisher) = subscriber_and_publisher(
+        &subscriber_session,
+        &publisher_session,
+        &topics,
+        Stream::Frame,
+    )
+    .await;
+    let started = Instant::now();
+    while publisher_session.get_shm_provider().into_option().is_none()
+        && started.elapsed() < Duration::from_secs(3)
+    {
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    let image = image::RgbImage::from_fn(320, 240, |x, y| {
+        image::Rgb([x as u8, (y * 3) as u8, (x ^ y) as u8])
+    });
+    let Some(kept) = PixelSlice::write(&publisher_session, image.as_raw()) else {
+        eprintln!(
+            "skipped: the session has no shared-memory pool (shared memory needs a memlock \
+             allowance of the pool size, or CAP_IPC_LOCK)"
+        );
+        return;
+    };
+    let mut sequences = Vec::new();
+    let started = Instant::now();
+    let mut sequence = 0_u64;
+    while sequences.len() < 2 {
+        assert!(
+            started.elapsed() < PROPAGATION_TIMEOUT,
+            "frames did not arrive"
+        );
+        sequence += 1;
+        let head = pb::ImageFrame::rgb_header_only(
+            pb::Header::new("front", sequence, 1_000 + sequence, "front_optical"),
+            320,
+            240,
+        );
+        let mut bytes = Vec::new();
+        head.encode_pixels_prefix(image.as_raw().len(), &mut bytes);
+        publish_payload(&publisher, kept.payload(bytes))
+            .await
+            .unwrap();
+        let wait = tokio::time::timeout(Duration::from_millis(100), frames.recv_async());
+        let Ok(Ok(sample)) = wait.await else { continue };
+        let payload = sample.payload();
+        assert!(in_shared_memory(payload), "the kept pixels arrived by copy");
+        let frame: pb::ImageFrame = decode(payload).unwrap();
+        let header = frame.header.clone().unwrap();
+        assert_eq!(header.acquisition_time_ns, 1_000 + header.frame_sequence);
+        let shared = frame.into_shared_rgb().unwrap();
+        assert_eq!(shared.as_raw().as_ref(), image.as_raw().as_slice());
+        // No copy: the pixels are a view into one slice of the received payload.
+        let pixels = shared.as_raw().as_ptr() as usize;
+        assert!(payload.slices().any(|slice| {
+            (slice.as_ptr() as usize..slice.as_ptr() as usize + slice.len()).contains(&pixels)
+        }));
+        sequences.push(header.frame_sequence);
+    }
+    assert_ne!(sequences[0], sequences[1]);
     publisher_session.close().await.unwrap();
     subscriber_session.close().await.unwrap();
 }

@@ -215,7 +215,7 @@ impl Node {
         sample: &Sample,
         limit: usize,
     ) -> Option<M> {
-        if sample.payload().as_shm().is_some() {
+        if conesight_bus::in_shared_memory(sample.payload()) {
             self.metrics.shared_memory_message();
         }
         match decode_with_limit::<M>(sample.payload(), limit) {

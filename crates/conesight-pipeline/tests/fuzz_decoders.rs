@@ -56,7 +56,7 @@ proptest! {
     #[test]
     fn arbitrary_bytes_never_panic(bytes in prop::collection::vec(any::<u8>(), 0..512)) {
         let payload = ZBytes::from(bytes.clone());
-        let _ = peek_header(&bytes);
+        let _ = peek_header(bytes.as_slice());
         if let Ok(frame) = decode::<pb::ImageFrame>(&payload) {
             let _ = frame.to_rgb();
         }

@@ -105,6 +105,19 @@ impl pb::ImageFrame {
         Ok(())
     }
 
+    /// Everything of [`Self::encode_with_pixels`] but the pixels: this message (whose `data`
+    /// is empty) and the key and length of a `data` field of `pixel_bytes`, appended to `buf`.
+    /// These bytes followed by the pixels, e.g. as two slices of one Zenoh payload with the
+    /// pixels in a shared-memory buffer kept for the next publish, are the whole message.
+    pub fn encode_pixels_prefix(&self, pixel_bytes: usize, buf: &mut Vec<u8>) {
+        debug_assert!(self.data.is_empty(), "data must be empty: it is appended");
+        buf.reserve(self.encoded_len() + key_len(DATA_FIELD) + 10);
+        // A Vec grows: encoding into it cannot run out of room.
+        let _ = self.encode(buf);
+        encode_key(DATA_FIELD, WireType::LengthDelimited, buf);
+        encode_varint(pixel_bytes as u64, buf);
+    }
+
     /// Checks the dimensions (1..=[`MAX_IMAGE_SIDE_PX`]), the encoding and, for raw encodings,
     /// that the data is exactly `width * height * 3` bytes. Does not decode JPEG.
     pub fn validate(&self) -> Result<ImageEncoding, ProtoError> {

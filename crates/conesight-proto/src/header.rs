@@ -85,7 +85,7 @@ struct HeaderOnly {
 /// The header of an encoded message (any conesight message: it is always field 1), read
 /// without decoding the rest; used to pair frames with their detections before the frame's
 /// pixels are decoded on a worker thread. The header is validated.
-pub fn peek_header(encoded: &[u8]) -> Result<pb::Header, ProtoError> {
+pub fn peek_header(encoded: impl prost::bytes::Buf) -> Result<pb::Header, ProtoError> {
     let view =
         <HeaderOnly as prost::Message>::decode(encoded).map_err(|e| ProtoError::Missing {
             field: format!("header (undecodable message: {e})"),
@@ -103,10 +103,10 @@ mod tests {
         let image = image::RgbImage::new(4, 2);
         let frame =
             pb::ImageFrame::from_rgb(pb::Header::new("front", 9, 5, "front_optical"), &image);
-        let header = peek_header(&frame.encode_to_vec()).unwrap();
+        let header = peek_header(frame.encode_to_vec().as_slice()).unwrap();
         assert_eq!(header.frame_sequence, 9);
-        assert!(peek_header(&[0xff, 0xff, 0xff]).is_err());
-        assert!(peek_header(&[]).is_err());
+        assert!(peek_header(&[0xff_u8, 0xff, 0xff][..]).is_err());
+        assert!(peek_header(&[][..]).is_err());
     }
 
     #[test]

@@ -7,8 +7,10 @@
 //! (the next frame goes out when the cones of the previous one arrive, or after
 //! `--pace-timeout-ms`).
 //!
-//! Frames are raw RGB8 by default (Zenoh puts large payloads in shared memory between
-//! processes of one host) or JPEG with `--frame-encoding jpeg` for frames that cross hosts.
+//! Frames are raw RGB8 by default, written straight into the session's shared-memory pool
+//! (looped frames' pixels are kept there after the first loop and published again without a
+//! copy, behind a new header), or JPEG with `--frame-encoding jpeg` for frames that cross
+//! hosts.
 //! With `--publish-boxes` the source's boxes (synthetic truth, or label files next to the
 //! images) go out on `.../detections`, standing in for the detector.
 //!
@@ -435,6 +437,11 @@ pub async fn run(
         interval
     });
     let mut last_info: Option<Instant> = None;
+    // Looped sources publish the same pixels again: keep them in shared memory.
+    let mut kept = matches!(frames, Frames::Preloaded(_) | Frames::Folder(_))
+        .then(|| conesight_bus::shm_pool_bytes(&args.common.zenoh))
+        .flatten()
+        .map(KeptPixels::new);
     let frame_id = format!("{camera_id}_optical");
     let mut sequence = 0_u64;
     while args.frames == 0 || sequence < args.frames {
@@ -461,7 +468,14 @@ pub async fn run(
         let encoding = args.common.zenoh.frame_encoding;
         let quality = args.common.zenoh.jpeg_quality;
         let (payload, storage) = tokio::task::block_in_place(|| {
-            frame_payload(&node, header.clone(), &item.frame.image, encoding, quality)
+            frame_payload(
+                &node,
+                header.clone(),
+                &item.frame,
+                encoding,
+                quality,
+                kept.as_mut(),
+            )
         })?;
         if storage == PayloadStorage::SharedMemory {
             node.metrics.shared_memory_published();
@@ -559,21 +573,78 @@ pub fn main_from(argv: Vec<std::ffi::OsString>) -> std::process::ExitCode {
     )
 }
 
-/// The bus payload of one frame, its header stamped as published. Raw RGB8 frames are encoded
-/// with their pixels copied once, straight into the session's shared memory when it has a pool
-/// (`conesight_bus::write_payload`); JPEG frames are compressed and encoded as usual.
+/// Pixels of looped frames kept in shared memory, by source index (a preloaded or folder
+/// frame's index), while they fit in the session's pool with [`KEPT_HEADROOM_FRAMES`] frames
+/// to spare.
+#[derive(Debug)]
+struct KeptPixels {
+    slices: std::collections::HashMap<u64, conesight_bus::PixelSlice>,
+    kept_bytes: usize,
+    pool_bytes: usize,
+}
+
+/// Frames' worth of the shared-memory pool [`KeptPixels`] leaves free: for frames that are
+/// not kept, and for the ones receivers still hold.
+const KEPT_HEADROOM_FRAMES: usize = 3;
+
+impl KeptPixels {
+    fn new(pool_bytes: usize) -> Self {
+        Self {
+            slices: std::collections::HashMap::new(),
+            kept_bytes: 0,
+            pool_bytes,
+        }
+    }
+
+    /// The pixels of `frame` in shared memory: kept from an earlier loop, or written now and
+    /// kept when they fit; `None` when they do not (or the session has no pool).
+    fn get_or_write(
+        &mut self,
+        session: &conesight_bus::zenoh::Session,
+        frame: &SourceFrame,
+    ) -> Option<conesight_bus::PixelSlice> {
+        let pixels = frame.image.as_raw();
+        if let Some(slice) = self.slices.get(&frame.index) {
+            return (slice.len() == pixels.len()).then(|| slice.clone());
+        }
+        let needed = pixels
+            .len()
+            .saturating_mul(1 + KEPT_HEADROOM_FRAMES)
+            .saturating_add(self.kept_bytes);
+        if needed > self.pool_bytes {
+            return None;
+        }
+        let slice = conesight_bus::PixelSlice::write(session, pixels)?;
+        self.kept_bytes += slice.len();
+        self.slices.insert(frame.index, slice.clone());
+        Some(slice)
+    }
+}
+
+/// The bus payload of one frame, its header stamped as published. Raw RGB8 frames: a looped
+/// frame's pixels are written into shared memory once and kept ([`KeptPixels`]), so each
+/// publish adds only a small header slice before them; other frames are encoded with their
+/// pixels copied once, straight into the session's shared memory when it has a pool
+/// (`conesight_bus::write_payload`). JPEG frames are compressed and encoded as usual.
 fn frame_payload(
     node: &Node,
     mut header: pb::Header,
-    image: &image::RgbImage,
+    frame: &SourceFrame,
     encoding: FrameEncoding,
     quality: u8,
+    kept: Option<&mut KeptPixels>,
 ) -> anyhow::Result<(conesight_bus::zenoh::bytes::ZBytes, PayloadStorage)> {
+    let image = &*frame.image;
     match encoding {
         FrameEncoding::Raw => {
             header.stamp_publish();
             let head = pb::ImageFrame::rgb_header_only(header, image.width(), image.height());
             let pixels = image.as_raw();
+            if let Some(slice) = kept.and_then(|kept| kept.get_or_write(&node.session, frame)) {
+                let mut bytes = Vec::with_capacity(128);
+                head.encode_pixels_prefix(pixels.len(), &mut bytes);
+                return Ok((slice.payload(bytes), PayloadStorage::SharedMemory));
+            }
             let len = head.encoded_len_with_pixels(pixels.len());
             Ok(write_payload(
                 &node.session,

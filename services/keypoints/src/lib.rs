@@ -220,7 +220,7 @@ impl PairFeed {
             let _ = node.decode::<pb::ImageFrame>(&sample, self.limit);
             return;
         }
-        let header = match peek_header(&sample.payload().to_bytes()) {
+        let header = match peek_header(conesight_bus::payload_buf(sample.payload())) {
             Ok(header) => header,
             Err(error) => {
                 node.metrics.frame_dropped();

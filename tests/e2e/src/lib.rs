@@ -493,7 +493,9 @@ impl StreamLog {
             topics.key(camera, stream)?,
             move |sample| {
                 let received_ns = now_ns();
-                let Ok(header) = conesight_proto::peek_header(&sample.payload().to_bytes()) else {
+                let Ok(header) =
+                    conesight_proto::peek_header(conesight_bus::payload_buf(sample.payload()))
+                else {
                     return;
                 };
                 if let Ok(mut sink) = sink.lock() {
