@@ -12,7 +12,7 @@ use std::convert::Infallible;
 use zenoh::Session;
 use zenoh::Wait;
 use zenoh::bytes::ZBytes;
-use zenoh::shm::{GarbageCollect, ZShm};
+use zenoh::shm::{GarbageCollect, ShmBuf, ZShm};
 
 /// Where a payload from [`write_payload`] was written.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -89,6 +89,13 @@ impl PixelSlice {
             .ok()?;
         buffer.copy_from_slice(data);
         Some(Self(ZShm::from(buffer)))
+    }
+
+    /// False once Zenoh has invalidated the buffer: its watchdog went unconfirmed, as when the
+    /// process stalled (stopped, swapped out) for more than about 100 ms. Receivers drop an
+    /// invalid buffer, so it must be written again.
+    pub fn is_valid(&self) -> bool {
+        self.0.is_valid()
     }
 
     /// Bytes held.

@@ -11,9 +11,9 @@ use conesight_bus::zenoh::Session;
 use conesight_bus::zenoh::pubsub::Publisher;
 use conesight_bus::zenoh::qos::{CongestionControl, Priority};
 use conesight_bus::{
-    PayloadStorage, PixelSlice, RingSubscriber, Stream, Topics, ZenohArgs, declare_publisher,
-    declare_subscriber, decode, in_shared_memory, open_session, publish, publish_payload,
-    write_payload,
+    PayloadStorage, PixelSlice, RingSubscriber, Stream, Topics, ZenohArgs,
+    declare_callback_subscriber, declare_publisher, declare_subscriber, decode, in_shared_memory,
+    open_session, publish, publish_payload, write_payload,
 };
 use conesight_proto::pb;
 
@@ -334,4 +334,94 @@ async fn kept_pixels_are_published_again_under_new_headers_without_a_copy() {
     assert_ne!(sequences[0], sequences[1]);
     publisher_session.close().await.unwrap();
     subscriber_session.close().await.unwrap();
+}
+
+/// A camera's loop: six kept 1920x1200 frames published again and again at 20 Hz to a
+/// subscriber holding the last four samples (as the keypoints service's pairing cache does):
+/// every frame arrives.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn every_frame_of_a_loop_of_kept_pixels_arrives() {
+    let (publisher_session, subscriber_session, topics) = two_peers("test-kept-loop").await;
+    let received = Arc::new(std::sync::Mutex::new(Vec::<u64>::new()));
+    let held = Arc::new(std::sync::Mutex::new(std::collections::VecDeque::new()));
+    let (sink, hold) = (received.clone(), held.clone());
+    let _subscriber = declare_callback_subscriber(
+        &subscriber_session,
+        topics.all_cameras(Stream::Frame).unwrap(),
+        move |sample| {
+            let header = conesight_proto::peek_header(conesight_bus::payload_buf(sample.payload()));
+            if let (Ok(header), Ok(mut sink)) = (header, sink.lock()) {
+                sink.push(header.frame_sequence);
+            }
+            if let Ok(mut hold) = hold.lock() {
+                hold.push_back(sample);
+                while hold.len() > 4 {
+                    hold.pop_front();
+                }
+            }
+        },
+    )
+    .await
+    .unwrap();
+    let publisher = declare_publisher(&publisher_session, &topics, "front", Stream::Frame)
+        .await
+        .unwrap();
+    let started = Instant::now();
+    while publisher_session.get_shm_provider().into_option().is_none()
+        && started.elapsed() < Duration::from_secs(3)
+    {
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    let kept: Vec<PixelSlice> = (0..6_u8)
+        .filter_map(|i| {
+            let image = image::RgbImage::from_pixel(1920, 1200, image::Rgb([i, 2, 3]));
+            PixelSlice::write(&publisher_session, image.as_raw())
+        })
+        .collect();
+    if kept.len() < 6 {
+        eprintln!("skipped: no shared-memory pool with room for six frames");
+        return;
+    }
+    let publish_frame = |sequence: u64| {
+        let head = pb::ImageFrame::rgb_header_only(
+            pb::Header::new("front", sequence, 1_000 + sequence, "front_optical"),
+            1920,
+            1200,
+        );
+        let mut bytes = Vec::new();
+        head.encode_pixels_prefix(1920 * 1200 * 3, &mut bytes);
+        kept[(sequence % 6) as usize].payload(bytes)
+    };
+    // Until the subscription has propagated.
+    let mut sequence = 0_u64;
+    while received.lock().unwrap().is_empty() {
+        assert!(started.elapsed() < PROPAGATION_TIMEOUT, "no frame arrived");
+        publish_payload(&publisher, publish_frame(sequence))
+            .await
+            .unwrap();
+        sequence += 1;
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    let first = sequence;
+    for _ in 0..60 {
+        publish_payload(&publisher, publish_frame(sequence))
+            .await
+            .unwrap();
+        sequence += 1;
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let got: Vec<u64> = received
+        .lock()
+        .unwrap()
+        .iter()
+        .copied()
+        .filter(|s| *s >= first)
+        .collect();
+    assert_eq!(
+        got.len(),
+        60,
+        "received {} of 60 frames: {got:?}",
+        got.len()
+    );
 }

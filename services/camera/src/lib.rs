@@ -605,7 +605,16 @@ impl KeptPixels {
     ) -> Option<conesight_bus::PixelSlice> {
         let pixels = frame.image.as_raw();
         if let Some(slice) = self.slices.get(&frame.index) {
-            return (slice.len() == pixels.len()).then(|| slice.clone());
+            if slice.is_valid() {
+                return (slice.len() == pixels.len()).then(|| slice.clone());
+            }
+            // Invalidated by Zenoh (this process stalled): receivers would drop it.
+            tracing::debug!(
+                index = frame.index,
+                "kept pixels invalidated; writing them again"
+            );
+            self.kept_bytes -= slice.len();
+            self.slices.remove(&frame.index);
         }
         let needed = pixels
             .len()
