@@ -54,6 +54,17 @@ async fn two_peers(namespace: &str) -> (Session, Session, Topics) {
     (listener, connector, Topics::from_args(&base).unwrap())
 }
 
+/// Waits up to 3 s for `session`'s shared-memory pool, which starts on first use (it may never
+/// come: no memlock allowance).
+async fn wait_for_pool(session: &Session) {
+    let started = Instant::now();
+    while session.get_shm_provider().into_option().is_none()
+        && started.elapsed() < Duration::from_secs(3)
+    {
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+}
+
 /// A subscriber to every camera's `stream` on one session and a publisher of camera `front` on
 /// the other.
 async fn subscriber_and_publisher(
@@ -215,13 +226,7 @@ async fn frames_written_in_place_arrive_in_shared_memory_and_decode_without_a_co
         Stream::Frame,
     )
     .await;
-    // The session's pool starts on first use; give it a moment (it may never come: no memlock).
-    let started = Instant::now();
-    while publisher_session.get_shm_provider().into_option().is_none()
-        && started.elapsed() < Duration::from_secs(3)
-    {
-        tokio::time::sleep(Duration::from_millis(50)).await;
-    }
+    wait_for_pool(&publisher_session).await;
     let image = image::RgbImage::from_fn(320, 240, |x, y| {
         image::Rgb([x as u8, y as u8, (x ^ y) as u8])
     });
@@ -280,12 +285,7 @@ async fn kept_pixels_are_published_again_under_new_headers_without_a_copy() {
         Stream::Frame,
     )
     .await;
-    let started = Instant::now();
-    while publisher_session.get_shm_provider().into_option().is_none()
-        && started.elapsed() < Duration::from_secs(3)
-    {
-        tokio::time::sleep(Duration::from_millis(50)).await;
-    }
+    wait_for_pool(&publisher_session).await;
     let image = image::RgbImage::from_fn(320, 240, |x, y| {
         image::Rgb([x as u8, (y * 3) as u8, (x ^ y) as u8])
     });
@@ -366,12 +366,8 @@ async fn every_frame_of_a_loop_of_kept_pixels_arrives() {
     let publisher = declare_publisher(&publisher_session, &topics, "front", Stream::Frame)
         .await
         .unwrap();
+    wait_for_pool(&publisher_session).await;
     let started = Instant::now();
-    while publisher_session.get_shm_provider().into_option().is_none()
-        && started.elapsed() < Duration::from_secs(3)
-    {
-        tokio::time::sleep(Duration::from_millis(50)).await;
-    }
     let kept: Vec<PixelSlice> = (0..6_u8)
         .filter_map(|i| {
             let image = image::RgbImage::from_pixel(1920, 1200, image::Rgb([i, 2, 3]));
