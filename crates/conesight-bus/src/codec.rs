@@ -105,12 +105,9 @@ impl Buf for PayloadBuf {
         self.chunks.front().map_or(&[], |chunk| chunk.as_ref())
     }
 
-    fn advance(&mut self, mut count: usize) {
-        assert!(
-            count <= self.remaining,
-            "advance past the end of a payload ({count} > {})",
-            self.remaining
-        );
+    fn advance(&mut self, count: usize) {
+        // Past the end stops at the end (prost checks `remaining` first; nothing here panics).
+        let mut count = count.min(self.remaining);
         self.remaining -= count;
         while count > 0 {
             let Some(front) = self.chunks.front_mut() else {
