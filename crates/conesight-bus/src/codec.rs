@@ -89,11 +89,6 @@ impl PayloadBuf {
         let remaining = chunks.iter().map(Bytes::len).sum();
         Self { chunks, remaining }
     }
-
-    /// Number of slices left.
-    pub fn slices(&self) -> usize {
-        self.chunks.len()
-    }
 }
 
 impl Buf for PayloadBuf {

@@ -12,7 +12,7 @@ use std::convert::Infallible;
 use zenoh::Session;
 use zenoh::Wait;
 use zenoh::bytes::ZBytes;
-use zenoh::shm::{GarbageCollect, ShmBuf, ZShm};
+use zenoh::shm::{GarbageCollect, ShmBuf, ZShm, ZShmMut};
 
 /// Where a payload from [`write_payload`] was written.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -30,15 +30,24 @@ pub fn write_payload<E>(
     len: usize,
     write: impl FnOnce(&mut [u8]) -> Result<(), E>,
 ) -> Result<(ZBytes, PayloadStorage), E> {
-    if let Some(provider) = session.get_shm_provider().into_option()
-        && let Ok(mut buffer) = provider.alloc(len).with_policy::<GarbageCollect>().wait()
-    {
+    if let Some(mut buffer) = alloc_shared(session, len) {
         write(&mut buffer[..])?;
         return Ok((ZBytes::from(buffer), PayloadStorage::SharedMemory));
     }
     let mut buffer = vec![0_u8; len];
     write(&mut buffer)?;
     Ok((ZBytes::from(buffer), PayloadStorage::Heap))
+}
+
+/// A buffer of `len` bytes from `session`'s shared-memory pool (released buffers collected
+/// first when it is full); `None` without a pool or room.
+fn alloc_shared(session: &Session, len: usize) -> Option<ZShmMut> {
+    let provider = session.get_shm_provider().into_option()?;
+    provider
+        .alloc(len)
+        .with_policy::<GarbageCollect>()
+        .wait()
+        .ok()
 }
 
 /// [`write_payload`] for writers that cannot fail.
@@ -81,12 +90,7 @@ impl PixelSlice {
     /// `data` copied into a new buffer of `session`'s pool, when it has one with room for it
     /// (the caller keeps count of what it holds against [`shm_pool_bytes`]).
     pub fn write(session: &Session, data: &[u8]) -> Option<Self> {
-        let provider = session.get_shm_provider().into_option()?;
-        let mut buffer = provider
-            .alloc(data.len())
-            .with_policy::<GarbageCollect>()
-            .wait()
-            .ok()?;
+        let mut buffer = alloc_shared(session, data.len())?;
         buffer.copy_from_slice(data);
         Some(Self(ZShm::from(buffer)))
     }

@@ -579,7 +579,6 @@ pub fn main_from(argv: Vec<std::ffi::OsString>) -> std::process::ExitCode {
 #[derive(Debug)]
 struct KeptPixels {
     slices: std::collections::HashMap<u64, conesight_bus::PixelSlice>,
-    kept_bytes: usize,
     pool_bytes: usize,
 }
 
@@ -591,7 +590,6 @@ impl KeptPixels {
     fn new(pool_bytes: usize) -> Self {
         Self {
             slices: std::collections::HashMap::new(),
-            kept_bytes: 0,
             pool_bytes,
         }
     }
@@ -613,18 +611,17 @@ impl KeptPixels {
                 index = frame.index,
                 "kept pixels invalidated; writing them again"
             );
-            self.kept_bytes -= slice.len();
             self.slices.remove(&frame.index);
         }
+        let kept_bytes: usize = self.slices.values().map(|slice| slice.len()).sum();
         let needed = pixels
             .len()
             .saturating_mul(1 + KEPT_HEADROOM_FRAMES)
-            .saturating_add(self.kept_bytes);
+            .saturating_add(kept_bytes);
         if needed > self.pool_bytes {
             return None;
         }
         let slice = conesight_bus::PixelSlice::write(session, pixels)?;
-        self.kept_bytes += slice.len();
         self.slices.insert(frame.index, slice.clone());
         Some(slice)
     }

@@ -139,6 +139,17 @@ fn assert_within_model_accuracy(fixture: &Fixture, received: &[Received], what: 
     assert!(p90_error <= MAX_P90_RELATIVE_ERROR, "p90 {p90_error}");
 }
 
+/// Waits up to 10 s for the cones of a frame acquired after `since_ns`: whether they came, and
+/// the time from `since` until they did (or until giving up).
+async fn cones_again(observer: &Observer, since_ns: u64, since: Instant) -> (bool, Duration) {
+    let came = observer
+        .wait_for(Duration::from_secs(10), |r| {
+            r.iter().any(|m| m.acquisition_ns > since_ns)
+        })
+        .await;
+    (came, since.elapsed())
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn frames_in_cones_out_within_model_accuracy_then_restart_each_service() {
     let _one_at_a_time = one_cluster_at_a_time().await;
@@ -189,12 +200,7 @@ async fn frames_in_cones_out_within_model_accuracy_then_restart_each_service() {
                 tokio::time::sleep(Duration::from_millis(10)).await;
             }
         }
-        let resumed = observer
-            .wait_for(Duration::from_secs(10), |r| {
-                r.iter().any(|m| m.acquisition_ns > restarted_ns)
-            })
-            .await;
-        let took = restarted.elapsed();
+        let (resumed, took) = cones_again(&observer, restarted_ns, restarted).await;
         println!(
             "{name}: killed, restarted, up after {:.2} s, cones again after {:.2} s",
             up.unwrap_or_default().as_secs_f64(),
@@ -226,12 +232,7 @@ async fn frames_in_cones_out_within_model_accuracy_then_restart_each_service() {
     let resumed_ns = conesight_proto::now_ns();
     let resumed_at = Instant::now();
     cluster.resume("camera").unwrap();
-    let resumed = observer
-        .wait_for(Duration::from_secs(10), |r| {
-            r.iter().any(|m| m.acquisition_ns > resumed_ns)
-        })
-        .await;
-    let took = resumed_at.elapsed();
+    let (resumed, took) = cones_again(&observer, resumed_ns, resumed_at).await;
     println!(
         "camera: stopped for 1 s, cones again after {:.2} s",
         took.as_secs_f64()
