@@ -1,19 +1,22 @@
-"""The evaluation CLI on a renderer-like folder (our JSON + calibration) and on unlabelled
+"""The evaluation CLI on a renderer-like folder (our JSON + calibration), on a YOLO folder as
+real data sets come (data.yaml names, unknown_cone ignored), shifted frames, and unlabelled
 frames: metrics JSON, annotated PNGs, counts per frame."""
 
 import json
 
 import cv2
 import numpy as np
+import pytest
 
-from conesight_train.detector.band import BandParams
-from conesight_train.detector.config import TrainConfig
+from conesight_train.detector.augment import DetectorAugmentParams
+from conesight_train.detector.config import SourceSpec, TrainConfig
 from conesight_train.detector.data import RendererFrames, ToyFrames
-from conesight_train.detector.evaluate import main
+from conesight_train.detector.evaluate import main, shift_frame
+from conesight_train.detector.frame_input import FrameInputParams
 from conesight_train.detector.model import DetectorParams
 from conesight_train.detector.train import train
 
-BAND = BandParams(band_top_px=32, input_width_px=128, input_height_px=64, factor=2)
+SMALL_INPUT = FrameInputParams(input_width_px=128, input_height_px=96)
 TINY = DetectorParams(
     stem_channels=8, stage_channels=(8, 16, 16, 16), stage_blocks=(1, 1, 1, 1), neck_channels=8
 )
@@ -44,7 +47,6 @@ def write_renderer_folder(root, count):
         ]
         record = {"image": f"images/{stem}.png", "cones": cones}
         (root / f"annotations/{stem}.json").write_text(json.dumps(record))
-        # Horizon at row 40 (cy 40, level camera) -> band top 0.
         (root / f"camera_info/{stem}.yaml").write_text(
             "camera_matrix:\n  data: [260.0, 0.0, 128.0, 0.0, 260.0, 40.0, 0.0, 0.0, 1.0]\n"
         )
@@ -57,9 +59,9 @@ def test_evaluate_labelled_and_unlabelled(tmp_path):
     data = tmp_path / "sim"
     write_renderer_folder(data, 3)
     frame = RendererFrames(data)[0]
-    assert frame.band_top_px == 0 and len(frame.boxes_px) > 0
+    assert frame.ground is not None and len(frame.boxes_px) > 0
     config = TrainConfig(
-        train=str(data),
+        sources=[SourceSpec(str(data))],
         val=str(data),
         out=str(tmp_path / "run"),
         steps=2,
@@ -67,7 +69,8 @@ def test_evaluate_labelled_and_unlabelled(tmp_path):
         val_every=2,
         warmup_steps=1,
         workers=0,
-        band=BAND,
+        input=SMALL_INPUT,
+        augment=DetectorAugmentParams(crop_width_px=96, crop_height_px=64),
         model=TINY,
     )
     train(config, progress=False)
@@ -90,6 +93,7 @@ def test_evaluate_labelled_and_unlabelled(tmp_path):
     assert report["frames"] == 3
     assert sum(row["truths"] for row in report["per_class"].values()) > 0
     assert set(report["recall_by_range"]) == {"0-10 m", "10-20 m", "20-30 m", ">= 30 m"}
+    assert set(report["recall_by_height"]) == {"0-20 px", "20-40 px", ">= 40 px"}
     assert sorted(p.name for p in (tmp_path / "png").iterdir()) == ["000000.png", "000001.png"]
     out = tmp_path / "counts.json"
     main(
@@ -109,3 +113,92 @@ def test_evaluate_labelled_and_unlabelled(tmp_path):
         for c in counts.values()
     )
     assert np.isfinite(report["recall"])
+
+
+def write_yolo_split(root, count):
+    """Toy frames as a Roboflow YOLO export: split/images, split/labels, data.yaml above, FSOCO
+    class names in FSOCO's order, one cone per frame relabelled unknown_cone."""
+    split = root / "test"
+    (split / "images").mkdir(parents=True)
+    (split / "labels").mkdir()
+    (root / "data.yaml").write_text(
+        "names: ['blue_cone', 'large_orange_cone', 'orange_cone', 'unknown_cone', 'yellow_cone']\n"
+    )
+    ours_to_fsoco = {0: 0, 1: 4, 2: 2, 3: 1}
+    for i in range(count):
+        frame = ToyFrames(count, seed=11)[i]
+        h, w = frame.image_rgb.shape[:2]
+        cv2.imwrite(str(split / f"images/f{i}.jpg"), frame.image_rgb[:, :, ::-1])
+        lines = []
+        for k, (b, c) in enumerate(zip(frame.boxes_px, frame.classes, strict=True)):
+            cls = 3 if k == 0 else ours_to_fsoco[int(c)]
+            cx, cy = (b[0] + b[2]) / 2 / w, (b[1] + b[3]) / 2 / h
+            lines.append(f"{cls} {cx:.6f} {cy:.6f} {(b[2] - b[0]) / w:.6f} {(b[3] - b[1]) / h:.6f}")
+        (split / f"labels/f{i}.txt").write_text("\n".join(lines) + "\n")
+    return split
+
+
+def test_yolo_folders_map_names_and_ignore_unknown_cones(tmp_path):
+    from conesight_train.detector.real_frames import YoloFrames, open_real
+
+    split = write_yolo_split(tmp_path / "ds", 2)
+    frames = YoloFrames(split)
+    toy = ToyFrames(2, seed=11)[1]
+    frame = frames[1]
+    assert frame.classes[0] == -1 and frame.difficult_mask()[0]
+    np.testing.assert_array_equal(frame.classes[1:], toy.classes[1:])
+    np.testing.assert_allclose(frame.boxes_px, toy.boxes_px, atol=0.01)
+    assert isinstance(open_real(f"yolo:{split}"), YoloFrames)
+    (tmp_path / "ds/data.yaml").write_text("names: ['blue_cone', 'traffic_light']\n")
+    with pytest.raises(Exception, match="traffic_light"):
+        YoloFrames(split)
+
+
+def test_shifted_frames_keep_their_cones_on_the_boxes():
+    frame = ToyFrames(1, seed=5, cones_per_frame=6)[0]
+    for fraction in (0.25, -0.25):
+        moved = shift_frame(frame, fraction)
+        assert moved.image_rgb.shape == frame.image_rgb.shape
+        dy = round(fraction * frame.image_rgb.shape[0])
+        for box in moved.boxes_px:
+            (k,) = np.nonzero(
+                np.all(np.abs(frame.boxes_px[:, [0, 2]] - box[[0, 2]]) < 1e-9, axis=1)
+            )[:1]
+            if len(k) and box[1] > 0 and box[3] < moved.image_rgb.shape[0]:
+                np.testing.assert_allclose(box[[1, 3]], frame.boxes_px[k[0], [1, 3]] + dy)
+
+
+def test_evaluate_a_yolo_split_with_a_shift(tmp_path):
+    split = write_yolo_split(tmp_path / "ds", 3)
+    config = TrainConfig(
+        sources=[SourceSpec(f"yolo:{split}")],
+        val=f"yolo:{split}",
+        out=str(tmp_path / "run"),
+        steps=2,
+        batch_size=2,
+        val_every=2,
+        warmup_steps=1,
+        workers=0,
+        input=SMALL_INPUT,
+        augment=DetectorAugmentParams(crop_width_px=96, crop_height_px=64),
+        model=TINY,
+    )
+    train(config, progress=False)
+    out = tmp_path / "real.json"
+    main(
+        [
+            "--checkpoint",
+            str(tmp_path / "run/last.pt"),
+            "--data",
+            f"yolo:{split}",
+            "--shift",
+            "0.25",
+            "--json",
+            str(out),
+        ]
+    )
+    report = json.loads(out.read_text())
+    assert report["frames"] == 3
+    # No ranges on real frames: every cone is in no distance band, all in height bands.
+    assert all(row["truths"] == 0 for row in report["recall_by_range"].values())
+    assert sum(row["truths"] for row in report["recall_by_height"].values()) > 0

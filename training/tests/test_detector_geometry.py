@@ -1,5 +1,5 @@
-"""Detector geometry: the band rule, targets and decoding invert each other, augmentation keeps
-boxes on the cones, label readers."""
+"""Detector geometry: the whole-frame input rule, targets and decoding invert each other,
+training crops keep boxes on the cones, label readers."""
 
 import json
 
@@ -8,49 +8,51 @@ import pytest
 import torch
 
 from conesight_train.data.errors import LabelError
-from conesight_train.detector.augment import DetectorAugmentParams, to_input
-from conesight_train.detector.band import (
-    BandParams,
-    band_to_input,
-    frame_from_input,
-    input_from_frame,
-)
+from conesight_train.detector.augment import DetectorAugmentParams, to_input, train_sample
 from conesight_train.detector.data import (
     TOY_BODY_RGB,
     LabelledFrame,
     RendererFrames,
     ToyFrames,
     read_json_labels,
+    vehicle_from_camera_rotation,
+)
+from conesight_train.detector.frame_input import (
+    FILL,
+    FrameInputParams,
+    boxes_to_frame,
+    frame_to_input,
 )
 from conesight_train.detector.model import STRIDE_PX, decode_boxes, peak_scores
 from conesight_train.detector.postprocess import Thresholds, decode
 from conesight_train.detector.targets import encode
 
-SMALL_BAND = BandParams(band_top_px=32, input_width_px=128, input_height_px=64, factor=2)
+SMALL_INPUT = FrameInputParams(input_width_px=128, input_height_px=96)
 
 
-def test_band_is_the_block_mean_of_the_clamped_rows():
+def test_a_1920x1200_frame_is_the_exact_2x2_block_mean_with_fill_below():
     rng = np.random.default_rng(0)
-    frame = rng.integers(0, 256, (150, 256, 3), dtype=np.uint8)
-    band = BandParams(band_top_px=40, input_width_px=128, input_height_px=64, factor=2)
-    x = band_to_input(frame, band)
-    top = 150 - 128  # 40 would overrun the 150-row frame: clamped
-    assert band.top_for(150) == top
-    ref = frame[top : top + 128].astype(np.float64).reshape(64, 2, 128, 2, 3).mean(axis=(1, 3))
-    np.testing.assert_allclose(x, ref.transpose(2, 0, 1), atol=1e-4)
-    with pytest.raises(ValueError, match="frame width 250 px"):
-        band_to_input(frame[:, :250], band)
-    with pytest.raises(ValueError, match="below the band height"):
-        band_to_input(frame[:100], band)
+    frame = rng.integers(0, 256, (120, 192, 3), dtype=np.uint8)
+    params = FrameInputParams(input_width_px=96, input_height_px=64)
+    x, scale = frame_to_input(frame, params)
+    assert scale == (0.5, 0.5) and x.shape == (3, 64, 96)
+    ref = frame.astype(np.float64).reshape(60, 2, 96, 2, 3).mean(axis=(1, 3))
+    np.testing.assert_allclose(x[:, :60], np.floor(ref + 0.5).transpose(2, 0, 1), atol=1e-4)
+    assert (x[:, 60:] == FILL).all()
 
 
-def test_box_mapping_round_trip():
-    boxes = np.array([[10.0, 600.0, 22.0, 633.0], [-0.5, 560.0, 3.0, 1199.5]])
-    band = BandParams()
-    there = input_from_frame(boxes, band, 560)
-    np.testing.assert_allclose(frame_from_input(there, band, 560), boxes, atol=1e-9)
-    # Pixel centre 0 of the input is the middle of frame pixels 0 and 1 (OpenCV convention).
-    assert there[1, 0] == pytest.approx(-0.5)
+@pytest.mark.parametrize("hw", [(720, 1280), (1038, 1280), (410, 1280), (2000, 300), (50, 60)])
+def test_any_frame_fits_the_input_and_boxes_map_back(hw):
+    params = FrameInputParams()
+    frame = np.zeros((*hw, 3), np.uint8)
+    x, (sx, sy) = frame_to_input(frame, params)
+    assert x.shape == (3, 608, 960)
+    rw, rh = params.resized_wh(hw)
+    assert rw == 960 or rh == 608
+    assert abs(sx - sy) < 0.01
+    boxes = np.array([[10.0, 20.0, 30.0, 45.0]])
+    there = boxes * [sx, sy, sx, sy]
+    np.testing.assert_allclose(boxes_to_frame(there, (sx, sy)), boxes, atol=1e-9)
 
 
 def perfect_outputs(boxes, classes, hw):
@@ -89,26 +91,45 @@ def test_targets_are_tall_gaussians_with_one_peak_per_box():
     assert tiny.mask.sum() == 0 and tiny.ignore.sum() > 0
 
 
-def test_augmented_boxes_stay_on_the_cones():
-    frames = ToyFrames(40, seed=3, cones_per_frame=3)
+def test_training_crops_keep_boxes_on_the_cones():
+    frames = ToyFrames(40, seed=3, cones_per_frame=6)
     params = DetectorAugmentParams(
+        crop_width_px=128,
+        crop_height_px=96,
         photometric=DetectorAugmentParams().photometric.__class__(
             p_colour=0, p_gamma=0, p_blur=0, p_noise=0, p_jpeg=0
-        )
+        ),
     )
     checked = 0
     for i in range(len(frames)):
         for seed in range(4):
-            sample = to_input(frames[i], SMALL_BAND, np.random.default_rng(seed), params)
+            sample = train_sample(frames[i], SMALL_INPUT, np.random.default_rng(seed), params)
+            assert sample.image.shape == (3, 96, 128)
             img = sample.image.transpose(1, 2, 0)
             for box, cls in zip(sample.boxes_px, sample.classes, strict=True):
                 h = box[3] - box[1]
-                if h < 14 or box[3] >= 63 or box[0] <= 1 or box[2] >= 127:
+                if h < 14 or box[3] >= 95 or box[1] <= 1 or box[0] <= 1 or box[2] >= 127:
                     continue  # small or clipped: the sampled pixel may be an edge
                 x, y = int((box[0] + box[2]) / 2), int(box[3] - 0.15 * h)
                 assert np.abs(img[y, x] - np.array(TOY_BODY_RGB[cls])).max() < 40, (i, seed, box)
                 checked += 1
     assert checked > 10
+
+
+def test_inference_input_keeps_boxes_on_the_cones():
+    checked = 0
+    frames = ToyFrames(20, seed=4, cones_per_frame=6)
+    for i in range(len(frames)):
+        sample = to_input(frames[i], SMALL_INPUT)
+        img = sample.image.transpose(1, 2, 0)
+        for box, cls in zip(sample.boxes_px, sample.classes, strict=True):
+            h = box[3] - box[1]
+            if h < 10 or box[0] <= 1 or box[2] >= 127:
+                continue
+            x, y = int((box[0] + box[2]) / 2), int(box[3] - 0.15 * h)
+            assert np.abs(img[y, x] - np.array(TOY_BODY_RGB[cls])).max() < 40, box
+            checked += 1
+    assert checked >= 5
 
 
 def test_json_and_yolo_readers(tmp_path):
@@ -160,34 +181,20 @@ def quaternion_xyzw(r):
     ]
 
 
-def test_horizon_follows_the_pitch(tmp_path):
-    from conesight_train.detector.band import HORIZON_MARGIN_PX, band_top_from
-    from conesight_train.detector.data import horizon_from_calibration
-
-    # vehicle_from_camera of a level camera: camera z = vehicle x, camera x = -y, camera y = -z.
+def test_extrinsics_forms_agree(tmp_path):
+    # The horizon (the image of the vehicle's forward axis) of a camera pitched down by 0.1
+    # rad, from each extrinsics form the renderer and conesight-core write.
+    pitch = 0.1
+    want = 600.0 - 2000.0 * np.tan(pitch)
     level = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
-    pitch = 0.1  # looking down
     c, s = np.cos(pitch), np.sin(pitch)
     about_y = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
-    (tmp_path / "info.yaml").write_text(
-        "camera_matrix:\n  data: [2000.0, 0.0, 960.0, 0.0, 2000.0, 600.0, 0.0, 0.0, 1.0]\n"
-    )
-    for rotation, want in ((level, 600.0), (about_y @ level, 600.0 - 2000.0 * np.tan(pitch))):
-        q = [float(v) for v in quaternion_xyzw(rotation)]
-        (tmp_path / "ext.yaml").write_text(
-            f"vehicle_from_camera:\n  translation_m: [0, 0, 1]\n  rotation_xyzw: {q}\n"
-        )
-        got = horizon_from_calibration(tmp_path / "info.yaml", tmp_path / "ext.yaml")
-        assert got == pytest.approx(want, abs=1e-6)
-    # conesight-core's current form: the camera body's rotation (pitch about vehicle y).
-    for text in (
-        f"vehicle_from_camera:\n  translation_m: [0, 0, 1]\n  rotation:\n"
-        f"    quaternion_xyzw: [0.0, {np.sin(pitch / 2)}, 0.0, {np.cos(pitch / 2)}]\n",
-        f"vehicle_from_camera:\n  translation_m: [0, 0, 1]\n  rotation:\n"
-        f"    rpy_rad: [0.0, {pitch}, 0.0]\n",
-        f"vehicle_from_camera: {{height_m: 1.0, pitch_down_rad: {pitch}}}\n",
-    ):
-        (tmp_path / "ext.yaml").write_text(text)
-        got = horizon_from_calibration(tmp_path / "info.yaml", tmp_path / "ext.yaml")
-        assert got == pytest.approx(600.0 - 2000.0 * np.tan(pitch), abs=1e-6), text
-    assert band_top_from(600.0) == 600 - HORIZON_MARGIN_PX == BandParams().band_top_px
+    poses = [
+        {"rotation_xyzw": [float(v) for v in quaternion_xyzw(about_y @ level)]},
+        {"rotation": {"quaternion_xyzw": [0.0, np.sin(pitch / 2), 0.0, np.cos(pitch / 2)]}},
+        {"rotation": {"rpy_rad": [0.0, pitch, 0.0]}},
+        {"height_m": 1.0, "pitch_down_rad": pitch},
+    ]
+    for pose in poses:
+        forward = vehicle_from_camera_rotation(pose).T @ np.array([1.0, 0.0, 0.0])
+        assert 600.0 + 2000.0 * forward[1] / forward[2] == pytest.approx(want, abs=1e-6), pose

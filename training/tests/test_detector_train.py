@@ -1,28 +1,24 @@
 """Detector training: a few steps on toy frames lower the loss, resume continues the same run,
-and the ONNX export matches PyTorch."""
-
-from dataclasses import replace
+a wall-clock budget stops it on a small learning rate, mixed sources are drawn by weight, and
+the ONNX export matches PyTorch and carries its metadata."""
 
 import numpy as np
+import onnx
 import pytest
 import torch
 
-from conesight_train.detector.band import BandParams
-from conesight_train.detector.config import TrainConfig
+from conesight_train.detector.augment import DetectorAugmentParams
+from conesight_train.detector.config import SourceSpec, TrainConfig
 from conesight_train.detector.data import ToyFrames
-from conesight_train.detector.dataset import DetectorDataset
-from conesight_train.detector.loss import LossParams, detector_loss
-from conesight_train.detector.model import (
-    ConeDetector,
-    DetectorParams,
-    ExportHead,
-    multiply_accumulates,
-    peak_scores,
-)
+from conesight_train.detector.dataset import FrameDataset, MixedDataset
+from conesight_train.detector.frame_input import FrameInputParams
+from conesight_train.detector.loss import detector_loss
+from conesight_train.detector.model import ConeDetector, DetectorParams, multiply_accumulates
 from conesight_train.detector.onnx_export import compare_with_pytorch, export_onnx
-from conesight_train.detector.train import load_checkpoint, train
+from conesight_train.detector.train import load_checkpoint, lr_factor, train
 
-SMALL_BAND = BandParams(band_top_px=32, input_width_px=128, input_height_px=64, factor=2)
+SMALL_INPUT = FrameInputParams(input_width_px=128, input_height_px=96)
+SMALL_CROP = DetectorAugmentParams(crop_width_px=96, crop_height_px=64)
 TINY = DetectorParams(
     stem_channels=8, stage_channels=(16, 16, 24, 32), stage_blocks=(1, 1, 1, 1), neck_channels=16
 )
@@ -31,7 +27,7 @@ TINY = DetectorParams(
 def test_a_few_steps_lower_the_loss_on_a_fixed_batch():
     torch.manual_seed(0)
     torch.set_num_threads(1)
-    data = DetectorDataset(ToyFrames(8, seed=1), SMALL_BAND)
+    data = FrameDataset(ToyFrames(8, seed=1), SMALL_INPUT)
     images = torch.stack([data[i][0] for i in range(8)])
     targets = {k: torch.stack([data[i][1][k] for i in range(8)]) for k in data[0][1]}
     model = ConeDetector(TINY)
@@ -48,106 +44,95 @@ def test_a_few_steps_lower_the_loss_on_a_fixed_batch():
 
 def test_training_run_checkpoints_and_resumes(tmp_path):
     config = TrainConfig(
-        train="toy:16",
+        sources=[SourceSpec("toy:16")],
         val="toy:4:9",
         out=str(tmp_path),
         steps=6,
         batch_size=4,
         val_every=3,
         warmup_steps=2,
-        band=SMALL_BAND,
+        workers=0,
+        input=SMALL_INPUT,
+        augment=SMALL_CROP,
         model=TINY,
     )
     summary = train(config, progress=False)
     assert summary["steps"] == 6 and len(summary["history"]) == 6
     first = load_checkpoint(tmp_path / "last.pt")
     assert first["step"] == 6 and "map50" in first["metrics"]
+    # A checkpoint per validation, for the curve of a metric against training time.
+    assert sorted(p.name for p in (tmp_path / "steps").iterdir()) == ["000003.pt", "000006.pt"]
     config.steps = 8
     resumed = train(config, resume=True, progress=False)
     assert resumed["steps"] == 8
     assert resumed["history"][:6] == summary["history"]  # the old history is kept, not redone
 
 
-@pytest.mark.parametrize(
-    ("row_features", "size_head"), [(False, False), (True, False), (True, True)]
-)
-def test_onnx_export_matches_pytorch(tmp_path, row_features, size_head):
+def test_wall_clock_budget_stops_the_run_and_decays_the_rate(tmp_path):
+    config = TrainConfig(
+        sources=[SourceSpec("toy:16")],
+        val="",
+        out=str(tmp_path),
+        steps=10_000,
+        max_minutes=0.05,
+        batch_size=2,
+        val_every=10_000,
+        warmup_steps=1,
+        workers=0,
+        input=SMALL_INPUT,
+        augment=SMALL_CROP,
+        model=TINY,
+    )
+    summary = train(config, progress=False)
+    assert 1 <= summary["steps"] < 10_000
+    assert summary["seconds"] >= 3.0
+    # Half the budget used: the cosine is half way down whatever the step count says.
+    assert lr_factor(2, config, 1.5) == pytest.approx(0.05 + 0.95 * 0.5, abs=1e-6)
+    assert lr_factor(2, config, 10.0) == pytest.approx(0.05)
+
+
+def test_mixed_sources_are_drawn_by_weight():
+    a, b = ToyFrames(5, seed=1), ToyFrames(7, seed=2)
+    data = MixedDataset([(a, 0.75), (b, 0.25)], 400, SMALL_INPUT, SMALL_CROP, seed=3)
+    picks = [data.pick(i)[0] for i in range(400)]
+    assert 0.68 < picks.count(0) / 400 < 0.82
+    image, targets = data[0]
+    assert image.shape == (3, 64, 96) and targets["heat"].shape == (4, 16, 24)
+    # Seeded per (epoch, index): the same sample twice, another one next epoch.
+    again = data[0][0]
+    torch.testing.assert_close(image, again)
+    data.set_epoch(1)
+    assert not torch.equal(image, data[0][0])
+    with pytest.raises(ValueError, match="weights"):
+        MixedDataset([(a, 0.0)], 4, SMALL_INPUT, SMALL_CROP)
+
+
+def test_onnx_export_matches_pytorch_and_carries_its_metadata(tmp_path):
     torch.manual_seed(0)
-    model = ConeDetector(replace(TINY, row_features=row_features, size_head=size_head)).eval()
+    model = ConeDetector(TINY).eval()
     # Non-trivial batch-norm statistics, so the check covers them.
     for m in model.modules():
         if isinstance(m, torch.nn.BatchNorm2d):
             m.running_mean.uniform_(-0.5, 0.5)
             m.running_var.uniform_(0.5, 2.0)
     path = tmp_path / "det.onnx"
-    export_onnx(model, path, SMALL_BAND)
-    inputs = np.random.default_rng(0).uniform(0, 255, (2, 3, 64, 128)).astype(np.float32)
+    export_onnx(model, path, SMALL_INPUT)
+    inputs = np.random.default_rng(0).uniform(0, 255, (2, 3, 96, 128)).astype(np.float32)
     parity = compare_with_pytorch(model, path, inputs)
     assert parity.max_box_diff_px < 1e-3 and parity.max_score_diff < 1e-5, parity
     assert parity.peak_flips <= 1e-3 * parity.cells, parity
     assert path.stat().st_size < 20e6
+    meta = {p.key: p.value for p in onnx.load(str(path)).metadata_props}
+    assert meta["conesight_layout"] == "conesight_frame"
+    assert meta["imgsz"] == "[96, 128]"
+    assert eval(meta["names"]) == {0: "blue", 1: "yellow", 2: "orange", 3: "large_orange"}
 
 
-def test_row_features_tell_rows_apart():
-    torch.manual_seed(0)
-    model = ConeDetector(replace(TINY, row_features=True)).eval()
-    assert DetectorParams.from_dict(model.params.to_dict()).row_features
-    image = torch.full((1, 3, 64, 128), 100.0)
-    with torch.no_grad():
-        with_rows, _ = model(image)
-        model.row_embed.weight.zero_()
-        model.row_embed.bias.zero_()
-        without, _ = model(image)
-    # What the row features add differs from row to row.
-    added = (with_rows - without)[0, :, :, 8]
-    assert float(added.std(dim=1).max()) > 1e-4
-    # Old checkpoints (no row_features key) load as before.
-    legacy = {k: v for k, v in TINY.to_dict().items() if k != "row_features"}
-    assert not DetectorParams.from_dict(legacy).row_features
+def test_old_band_settings_are_refused_with_a_reason():
+    with pytest.raises(ValueError, match="horizon-band"):
+        DetectorParams.from_dict({**TINY.to_dict(), "size_head": True})
 
 
 def test_default_network_is_light():
-    macs = multiply_accumulates(ConeDetector(), (320, 960))
-    assert 50e6 < macs < 1e9
-
-
-def test_size_head_splits_the_orange_family_by_p_large():
-    torch.manual_seed(0)
-    model = ConeDetector(replace(TINY, row_features=True, size_head=True)).eval()
-    assert model.params.heat_channels == 3
-    assert DetectorParams.from_dict(model.params.to_dict()).size_head
-    image = torch.rand(1, 3, 64, 128) * 255
-    with torch.no_grad():
-        heat, reg = model(image)
-        out = ExportHead(model)(image)
-    assert heat.shape[1] == 3 and reg.shape[1] == 5
-    assert out.shape == (1, 8, 16 * 32)
-    family = peak_scores(heat)[:, 2].flatten(1)
-    p_large = torch.sigmoid(reg[:, 4]).flatten(1)
-    torch.testing.assert_close(out[:, 6] + out[:, 7], family)
-    torch.testing.assert_close(out[:, 7], family * p_large)
-    # Old checkpoints (no size_head key) load with the four heatmaps.
-    legacy = {k: v for k, v in TINY.to_dict().items() if k != "size_head"}
-    assert not DetectorParams.from_dict(legacy).size_head
-
-
-def test_size_head_learns_large_from_small_orange_cones():
-    """Toy large cones are taller at the same row: a few steps lower the size loss."""
-    torch.manual_seed(0)
-    torch.set_num_threads(1)
-    frames = ToyFrames(8, seed=4, cones_per_frame=10)
-    data = DetectorDataset(frames, SMALL_BAND)
-    images = torch.stack([data[i][0] for i in range(8)])
-    targets = {k: torch.stack([data[i][1][k] for i in range(8)]) for k in data[0][1]}
-    assert bool((targets["dense_class"] == 3).any()) and bool((targets["dense_class"] == 2).any())
-    model = ConeDetector(replace(TINY, row_features=True, size_head=True))
-    optimizer = torch.optim.Adam(model.parameters(), lr=3e-3)
-    params = LossParams(dense=True)
-    sizes = []
-    for _ in range(40):
-        loss = detector_loss(*model(images), targets, params)
-        optimizer.zero_grad()
-        loss.total.backward()
-        optimizer.step()
-        sizes.append(float(loss.size.detach()))
-    assert np.mean(sizes[-5:]) < 0.6 * np.mean(sizes[:3]), sizes
+    macs = multiply_accumulates(ConeDetector(), (608, 960))
+    assert 50e6 < macs < 1.5e9

@@ -1,16 +1,19 @@
-"""Frame -> (network input, boxes in input pixels), with seeded augmentation.
+"""Frame -> network input: the whole frame for inference (`to_input`, the rule of
+`frame_input.py`), and seeded random crops for training (`train_sample`).
 
-Geometric, on the full-resolution band before the box filter (so training sees exactly the
-inference preprocessing): band jitter (the band's top row moves by up to `band_jitter_px`,
-standing in for pitch and horizon changes), scale about the band's centre column and top row
-(cones nearer or farther), horizontal flip (boxes mirror; classes are unchanged: a mirrored
-blue cone is still blue). Photometric (colour, gamma, blur, noise, JPEG): the keypoint
-pipeline's `augment.photometric`, applied after the box filter (at the network's resolution,
-a quarter of the pixels).
+A training sample is a `crop_width x crop_height` window of the frame rescaled to a random
+multiple (`scale_range`, log-uniform) of its inference scale, so the network sees cones at
+every size the same camera gives them and at those of other resolutions. The window is centred
+near a random cone (`p_on_cone`) or anywhere, and may reach past the frame (grey fill, as the
+inference input's padding): cones appear in every part of the input, the property that makes
+the detector indifferent to camera pitch, mount height and the horizon. Then a horizontal flip
+(classes unchanged: a mirrored blue cone is still blue) and the photometric augmentation of the
+keypoint pipeline (colour, gamma, blur, noise, JPEG).
 
-Boxes keep their part inside the input; a box keeping less than MIN_VISIBLE_FRACTION of its
-area is dropped (and its region left out of the negatives by `targets.encode` through
-MIN_BOX_PX only when tiny; partial cones at the border remain positives).
+Frames come at full resolution (`LabelledFrame`) or box-filtered by a factor (`ReducedFrame`,
+the renderer cache); boxes are always in continuous full-frame pixels. Boxes keep their part
+inside the window; one keeping less than MIN_VISIBLE_FRACTION of its area is dropped, and its
+cells left out of the negatives by `targets.encode` only when it is marked difficult.
 """
 
 from __future__ import annotations
@@ -21,20 +24,22 @@ import cv2
 import numpy as np
 
 from conesight_train.augment import AugmentParams, photometric
-from conesight_train.detector.band import BandParams, band_to_input
 from conesight_train.detector.cache import ReducedFrame
 from conesight_train.detector.data import LabelledFrame
+from conesight_train.detector.frame_input import FILL, FrameInputParams, frame_to_input
 
 MIN_VISIBLE_FRACTION = 0.4
 
 
 @dataclass(frozen=True)
 class DetectorAugmentParams:
-    """Probabilities and ranges (defaults: the training configuration)."""
+    """Crop size, probabilities and ranges (defaults: the training configuration)."""
 
-    band_jitter_px: int = 48
-    scale_range: tuple[float, float] = (0.8, 1.25)
-    p_scale: float = 0.6
+    crop_width_px: int = 640
+    crop_height_px: int = 384
+    # Multiples of the frame's inference scale (log-uniform).
+    scale_range: tuple[float, float] = (0.6, 1.6)
+    p_on_cone: float = 0.7
     p_flip: float = 0.5
     photometric: AugmentParams = field(
         default_factory=lambda: AugmentParams(p_blur=0.3, blur_sigma_max_px=1.0, p_jpeg=0.3)
@@ -50,11 +55,11 @@ class InputSample:
     classes: np.ndarray
     range_m: np.ndarray
     difficult: np.ndarray
-    top_px: int  # the frame row of the input's top edge (before augmentation)
+    scale_xy: tuple[float, float]  # input px per frame px (inference; 0 for training crops)
 
 
-def _clip_boxes(
-    boxes: np.ndarray, frame: LabelledFrame, w: float, h: float
+def _keep_visible(
+    boxes: np.ndarray, frame: LabelledFrame | ReducedFrame, w: float, h: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     classes, ranges, difficult = frame.classes, frame.range_m, frame.difficult_mask()
     if len(boxes) == 0:
@@ -66,125 +71,66 @@ def _clip_boxes(
     return clipped[keep], classes[keep], ranges[keep], difficult[keep]
 
 
-def to_input(
+def to_input(frame: LabelledFrame, params: FrameInputParams) -> InputSample:
+    """The whole frame as network input (inference), boxes mapped into it."""
+    image, (sx, sy) = frame_to_input(frame.image_rgb, params)
+    boxes = frame.boxes_px.astype(np.float64).reshape(-1, 4) * [sx, sy, sx, sy]
+    return InputSample(
+        image,
+        *_keep_visible(boxes, frame, params.input_width_px, params.input_height_px),
+        (sx, sy),
+    )
+
+
+def _stored(frame: LabelledFrame | ReducedFrame) -> tuple[np.ndarray, float, tuple[int, int]]:
+    """(stored image, stored px per frame px, frame (h, w))."""
+    if isinstance(frame, ReducedFrame):
+        return frame.image_rgb, 1.0 / frame.factor, frame.frame_hw
+    h, w = frame.image_rgb.shape[:2]
+    return frame.image_rgb, 1.0, (h, w)
+
+
+def train_sample(
     frame: LabelledFrame | ReducedFrame,
-    band: BandParams,
-    rng: np.random.Generator | None = None,
-    params: DetectorAugmentParams | None = None,
-) -> InputSample:
-    """The band of `frame` as network input; augmented when `rng` is given. A `ReducedFrame`
-    (the training cache) is only taken with `rng` (training); see `_reduced_to_input`."""
-    if isinstance(frame, ReducedFrame):
-        height, width = frame.frame_hw
-        if rng is None:
-            raise ValueError(
-                "a cached (reduced) frame is for augmented training only: evaluate on the "
-                "renderer folder, whose full-resolution frames give the exact preprocessing"
-            )
-    else:
-        height, width = frame.image_rgb.shape[:2]
-    top = band.top_for(height, frame.band_top_px)
-    boxes = frame.boxes_px.astype(np.float64).reshape(-1, 4).copy()
-    if rng is None:
-        image = band_to_input(frame.image_rgb, band, top)
-        boxes[:, [1, 3]] -= top
-        boxes /= band.factor
-        return InputSample(
-            image,
-            *_clip_boxes(boxes, frame, band.input_width_px, band.input_height_px),
-            top,
-        )
-    p = params or DetectorAugmentParams()
-    if isinstance(frame, ReducedFrame):
-        return _reduced_to_input(frame, band, top, rng, p)
-    top = int(
-        np.clip(
-            top + rng.integers(-p.band_jitter_px, p.band_jitter_px + 1),
-            0,
-            height - band.band_height_px,
-        )
-    )
-    scale = float(rng.uniform(*p.scale_range)) if rng.random() < p.p_scale else 1.0
-    flip = rng.random() < p.p_flip
-    # Continuous coordinates: x' = a x + bx, y' = scale (y - top) (anchored at the band top).
-    a = -scale if flip else scale
-    bx = width / 2 - a * width / 2
-    by = -scale * top
-    # cv2 works on pixel centres: p' = a p + (a * 0.5 + b - 0.5).
-    matrix = np.array([[a, 0.0, a * 0.5 + bx - 0.5], [0.0, scale, scale * 0.5 + by - 0.5]])
-    warped = cv2.warpAffine(
-        frame.image_rgb,
-        matrix,
-        (width, band.band_height_px),
-        flags=cv2.INTER_LINEAR,
-        borderMode=cv2.BORDER_REFLECT_101,
-    )
-    # Photometric after the box filter: 1/factor^2 of the pixels (blur, noise and JPEG act at
-    # the network's resolution).
-    reduced = np.clip(band_to_input(warped, band, 0) + 0.5, 0, 255).astype(np.uint8)
-    image = photometric(reduced.transpose(1, 2, 0), rng, p.photometric)
-    image = np.ascontiguousarray(image.transpose(2, 0, 1), dtype=np.float32)
-    xs = boxes[:, [0, 2]] * a + bx
-    boxes[:, 0], boxes[:, 2] = xs.min(axis=1), xs.max(axis=1)
-    boxes[:, [1, 3]] = boxes[:, [1, 3]] * scale + by
-    boxes /= band.factor
-    return InputSample(
-        image,
-        *_clip_boxes(boxes, frame, band.input_width_px, band.input_height_px),
-        top,
-    )
-
-
-def _reduced_to_input(
-    frame: ReducedFrame,
-    band: BandParams,
-    top: int,
+    params: FrameInputParams,
     rng: np.random.Generator,
-    p: DetectorAugmentParams,
+    p: DetectorAugmentParams | None = None,
 ) -> InputSample:
-    """`to_input`'s augmented path on a frame already box-filtered by the band's factor: the
-    same draws and the same continuous mapping, applied at the reduced resolution (the band's
-    top row is kept on a multiple of the factor so an unscaled sample is exactly the
-    inference input's pixels, rounded to uint8 as on the full-resolution path)."""
-    f = band.factor
-    if frame.factor != f:
-        raise ValueError(f"cache factor {frame.factor} does not match the band's factor {f}")
-    height, width = frame.frame_hw
-    top = int(
-        np.clip(
-            top + rng.integers(-p.band_jitter_px, p.band_jitter_px + 1),
-            0,
-            height - band.band_height_px,
-        )
-    )
-    top -= top % f
-    scale = float(rng.uniform(*p.scale_range)) if rng.random() < p.p_scale else 1.0
-    flip = rng.random() < p.p_flip
-    a = -scale if flip else scale
-    bx = width / 2 - a * width / 2
-    # Reduced continuous coordinates u = x / f: u' = a u + bx / f, v' = scale (v - top / f).
-    matrix = np.array(
-        [
-            [a, 0.0, a * 0.5 + bx / f - 0.5],
-            [0.0, scale, scale * 0.5 - scale * top / f - 0.5],
+    """A random training crop of `frame` (module docs)."""
+    p = p or DetectorAugmentParams()
+    stored, per_frame_px, frame_hw = _stored(frame)
+    sx0, sy0 = params.scale_xy(frame_hw)
+    lo, hi = np.log(p.scale_range[0]), np.log(p.scale_range[1])
+    scale = float(np.exp(rng.uniform(lo, hi))) * min(sx0, sy0)
+    # Resize the stored image to `scale` input px per frame px.
+    r = scale / per_frame_px
+    sh, sw = stored.shape[:2]
+    new_w, new_h = max(1, round(sw * r)), max(1, round(sh * r))
+    interpolation = cv2.INTER_AREA if r < 1 else cv2.INTER_LINEAR
+    scaled = cv2.resize(stored, (new_w, new_h), interpolation=interpolation)
+    kx, ky = new_w / sw * per_frame_px, new_h / sh * per_frame_px  # input px per frame px
+    boxes = frame.boxes_px.astype(np.float64).reshape(-1, 4) * [kx, ky, kx, ky]
+    cw, ch = p.crop_width_px, p.crop_height_px
+    usable = np.nonzero(~frame.difficult_mask())[0]
+    if len(usable) and rng.random() < p.p_on_cone:
+        b = boxes[usable[rng.integers(len(usable))]]
+        x0 = (b[0] + b[2]) / 2 - rng.uniform(0.1, 0.9) * cw
+        y0 = (b[1] + b[3]) / 2 - rng.uniform(0.1, 0.9) * ch
+    else:
+        x0 = rng.uniform(-0.25 * cw, max(-0.25 * cw, new_w - 0.75 * cw))
+        y0 = rng.uniform(-0.25 * ch, max(-0.25 * ch, new_h - 0.75 * ch))
+    ox, oy = round(x0), round(y0)
+    canvas = np.full((ch, cw, 3), FILL, np.uint8)
+    src_x0, src_y0 = max(ox, 0), max(oy, 0)
+    src_x1, src_y1 = min(ox + cw, new_w), min(oy + ch, new_h)
+    if src_x1 > src_x0 and src_y1 > src_y0:
+        canvas[src_y0 - oy : src_y1 - oy, src_x0 - ox : src_x1 - ox] = scaled[
+            src_y0:src_y1, src_x0:src_x1
         ]
-    )
-    reduced = cv2.warpAffine(
-        frame.image_rgb,
-        matrix,
-        (band.input_width_px, band.input_height_px),
-        flags=cv2.INTER_LINEAR,
-        borderMode=cv2.BORDER_REFLECT_101,
-    )
-    image = photometric(reduced, rng, p.photometric)
+    boxes -= [ox, oy, ox, oy]
+    if rng.random() < p.p_flip:
+        canvas = canvas[:, ::-1]
+        boxes[:, [0, 2]] = cw - boxes[:, [2, 0]]
+    image = photometric(np.ascontiguousarray(canvas), rng, p.photometric)
     image = np.ascontiguousarray(image.transpose(2, 0, 1), dtype=np.float32)
-    boxes = frame.boxes_px.astype(np.float64).reshape(-1, 4).copy()
-    xs = boxes[:, [0, 2]] * a + bx
-    boxes[:, 0], boxes[:, 2] = xs.min(axis=1), xs.max(axis=1)
-    boxes[:, [1, 3]] = (boxes[:, [1, 3]] - top) * scale
-    boxes /= f
-    return InputSample(
-        image,
-        *_clip_boxes(boxes, frame, band.input_width_px, band.input_height_px),
-        top,
-    )
+    return InputSample(image, *_keep_visible(boxes, frame, cw, ch), (0.0, 0.0))

@@ -1,6 +1,7 @@
-"""A training cache of a renderer folder: every frame decoded once and box-filtered by the band's
-factor into one uint8 memory map, with its labels, so a training step spends its time in the
-network instead of in PNG decoding (100 ms per 1920x1200 frame, 8 per step).
+"""A training cache of a renderer folder: every frame decoded once and box-filtered by an integer
+factor (2: a 1920x1200 frame at the detector's input scale) into one uint8 memory map, with its
+labels, so a training step spends its time in the network instead of in PNG decoding (100 ms
+per 1920x1200 frame, 8 per step).
 
     python -m conesight_train.detector.cache --data out/sim-train --out build/cache/sim-train
 
@@ -8,12 +9,11 @@ Layout of the cache folder:
 
     frames.npy   uint8 [N, H / factor, W / factor, 3] RGB (NumPy .npy, memory-mapped)
     index.json   {"format", "source", "frames", "factor", "frame_hw", "reduced_hw",
-                  "items": [{"name", "band_top_px", "boxes_px", "classes", "range_m",
-                             "difficult"}]}
+                  "items": [{"name", "boxes_px", "classes", "range_m", "difficult"}]}
 
 Boxes stay in continuous full-frame pixels; the reduced image is the exact block mean
-(`cv2.INTER_AREA` with an integer factor on float32) rounded to uint8, which is what the
-augmented path of `augment.to_input` feeds the photometric augmentation anyway. A cache is
+(`cv2.INTER_AREA` with an integer factor on float32) rounded to uint8, the inference input's
+pixels for a 1920x1200 frame (`frame_input.py`). A cache is
 reused when its index names the same source folder, frame count and factor, and rebuilt
 otherwise (`ensure_cache`). `CachedFrames` reads it (a `FrameSource` of `ReducedFrame`s).
 """
@@ -48,7 +48,6 @@ class ReducedFrame:
     range_m: np.ndarray
     name: str
     difficult: np.ndarray
-    band_top_px: int | None
 
     def difficult_mask(self) -> np.ndarray:
         """Bool [M] (see `LabelledFrame.difficult_mask`)."""
@@ -59,7 +58,7 @@ def reduce_frame(image_rgb: np.ndarray, factor: int) -> np.ndarray:
     """HxWx3 uint8 -> (H/factor)x(W/factor)x3 uint8 block means (rounded)."""
     h, w = image_rgb.shape[:2]
     if h % factor or w % factor:
-        raise ValueError(f"frame {w}x{h} px is not a multiple of the band factor {factor}")
+        raise ValueError(f"frame {w}x{h} px is not a multiple of the cache factor {factor}")
     mean = cv2.resize(
         image_rgb.astype(np.float32), (w // factor, h // factor), interpolation=cv2.INTER_AREA
     )
@@ -69,7 +68,6 @@ def reduce_frame(image_rgb: np.ndarray, factor: int) -> np.ndarray:
 def _item(frame: LabelledFrame) -> dict[str, object]:
     return {
         "name": frame.name,
-        "band_top_px": frame.band_top_px,
         "boxes_px": frame.boxes_px.tolist(),
         "classes": frame.classes.tolist(),
         "range_m": [None if np.isnan(r) else float(r) for r in frame.range_m],
@@ -205,7 +203,6 @@ class CachedFrames:
             ranges,
             str(item["name"]),
             np.asarray(item["difficult"], bool),
-            item["band_top_px"],
         )
 
     def __getstate__(self) -> dict[str, object]:
@@ -219,7 +216,9 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", type=Path, required=True, help="renderer output folder")
     parser.add_argument("--out", type=Path, required=True, help="cache folder")
-    parser.add_argument("--factor", type=int, default=2, help="the band's box-filter factor")
+    parser.add_argument(
+        "--factor", type=int, default=2, help="box-filter factor (2: 1920x1200 at the input scale)"
+    )
     parser.add_argument("--workers", type=int, default=2)
     args = parser.parse_args(argv)
     path = build_cache(args.data, args.out, args.factor, args.workers)

@@ -1,8 +1,10 @@
 """Training run settings: a dataclass read from YAML, overridable by CLI flags.
 
-Data sources: a renderer output folder, or `toy:COUNT[:SEED]` for procedural frames (tests and
-smoke runs; they need a band that fits their size, e.g. `band: {input_width_px: 128,
-input_height_px: 64, factor: 2, band_top_px: 32}` for the default 256x160 toy frames).
+Data sources (`sources`, each drawn with its `weight` for every sample):
+- `yolo:PATH` / `supervisely:PATH`: real labelled frames (`real_frames.py`);
+- a renderer output folder, decoded once into `cache` (`cache.py`) when one is given;
+- `toy:COUNT[:SEED]`: procedural frames (tests and smoke runs).
+Validation (`val`) takes the same specs; the best checkpoint is chosen on it.
 """
 
 from __future__ import annotations
@@ -13,24 +15,40 @@ from typing import Any
 
 import yaml
 
-from conesight_train.detector.band import BandParams
+from conesight_train.augment import AugmentParams
+from conesight_train.detector.augment import DetectorAugmentParams
 from conesight_train.detector.data import FrameSource, RendererFrames, ToyFrames
+from conesight_train.detector.frame_input import FrameInputParams
 from conesight_train.detector.loss import LossParams
 from conesight_train.detector.model import DetectorParams
 from conesight_train.detector.postprocess import Thresholds
+
+
+@dataclass(frozen=True)
+class SourceSpec:
+    """One training source and its share of the samples."""
+
+    path: str
+    weight: float = 1.0
+    cache: str = ""  # renderer folders only: the decoded cache folder
 
 
 @dataclass
 class TrainConfig:
     """Every setting of a run (defaults: the shipped configuration)."""
 
-    train: str = "out/sim-train"
-    # Decoded, box-filtered copy of `train` (detector/cache.py), built on first use; "" reads
-    # the PNGs on every step instead (100 ms per frame).
-    train_cache: str = ""
-    val: str = "out/sim-val"
+    sources: list[SourceSpec] = field(
+        default_factory=lambda: [
+            SourceSpec("yolo:../shared/data/real-train/fsoco-boxes/train", 0.7),
+            SourceSpec("out/sim-train", 0.3, "build/cache/sim-train"),
+        ]
+    )
+    val: str = "yolo:../shared/data/real-train/fsoco-boxes/valid"
     out: str = "build/train/detector"
     steps: int = 2000
+    # Stop early once the run has used this much wall-clock time (0: no limit); the learning
+    # rate schedule follows the step count.
+    max_minutes: float = 0.0
     batch_size: int = 8
     lr: float = 2e-3
     weight_decay: float = 1e-4
@@ -40,9 +58,10 @@ class TrainConfig:
     workers: int = 1
     val_every: int = 250
     val_limit: int = 100
-    # Repeat-factor sampling threshold t (detector/sampling.py); 0 = every frame once per epoch.
-    repeat_factor_threshold: float = 0.0
-    band: BandParams = field(default_factory=BandParams)
+    # A checkpoint of the same network to start from ("" = from scratch).
+    init_from: str = ""
+    input: FrameInputParams = field(default_factory=FrameInputParams)
+    augment: DetectorAugmentParams = field(default_factory=DetectorAugmentParams)
     model: DetectorParams = field(default_factory=DetectorParams)
     thresholds: Thresholds = field(default_factory=Thresholds)
     loss: LossParams = field(default_factory=LossParams)
@@ -63,8 +82,19 @@ class TrainConfig:
                 f"unknown detector config keys {sorted(unknown)}; known: {sorted(known)}"
             )
         d = dict(d)
-        if "band" in d:
-            d["band"] = BandParams(**d["band"])
+        if "sources" in d:
+            d["sources"] = [
+                SourceSpec(s) if isinstance(s, str) else SourceSpec(**s) for s in d["sources"]
+            ]
+        if "input" in d:
+            d["input"] = FrameInputParams(**d["input"])
+        if "augment" in d:
+            a = dict(d["augment"])
+            if "scale_range" in a:
+                a["scale_range"] = tuple(a["scale_range"])
+            if "photometric" in a:
+                a["photometric"] = AugmentParams(**a["photometric"])
+            d["augment"] = DetectorAugmentParams(**a)
         if "model" in d:
             d["model"] = DetectorParams.from_dict({**DetectorParams().to_dict(), **d["model"]})
         if "thresholds" in d:
@@ -82,11 +112,19 @@ class TrainConfig:
         return TrainConfig.from_dict(data)
 
 
-def open_source(spec: str, limit: int | None = None) -> FrameSource:
-    """A renderer folder or `toy:COUNT[:SEED]`."""
+def open_source(spec: str, limit: int | None = None, cache: str = "") -> FrameSource:
+    """A source spec (module docs) as frames; `cache` applies to renderer folders."""
+    from conesight_train.detector.real_frames import open_real
+
     if spec.startswith("toy:"):
         parts = spec.split(":")
         count = int(parts[1])
         seed = int(parts[2]) if len(parts) > 2 else 0
         return ToyFrames(count if limit is None else min(count, limit), seed)
+    if spec.startswith(("yolo:", "supervisely:")):
+        return open_real(spec, limit)
+    if cache:
+        from conesight_train.detector.cache import CachedFrames, ensure_cache
+
+        return CachedFrames(ensure_cache(spec, cache, 2))
     return RendererFrames(spec, limit)

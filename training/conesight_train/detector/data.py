@@ -8,7 +8,8 @@ CLASS_NAMES) and range_m [M] (NaN when the labels have no distances).
 Renderer layout (crates/conesight-sim writers): `images/NNNNNN.png|jpg`, and either
 `annotations/NNNNNN.json` (ours: `cones[*].class_id`, `.bbox.{x_min_px, ...}` OpenCV edges,
 `.range_m`) or `labels/NNNNNN.txt` (YOLO). JSON is preferred when both exist (it has ranges);
-with it, `camera_info/` and `extrinsics/` give each frame's horizon and so its band.
+with it, `camera_info/` and `extrinsics/` give each frame's calibration (flat-ground ranges of
+detections for the metrics, `ground.py`). Real labelled frames: `real_frames.py`.
 """
 
 from __future__ import annotations
@@ -24,7 +25,6 @@ import yaml
 
 from conesight_train.data.errors import LabelError
 from conesight_train.data.yolo_txt import read_yolo_txt
-from conesight_train.detector.band import band_top_from, horizon_row_px
 from conesight_train.detector.ground import GroundCamera
 from conesight_train.detector.model import CLASS_NAMES
 
@@ -63,7 +63,6 @@ class LabelledFrame:
     range_m: np.ndarray
     name: str = ""
     difficult: np.ndarray | None = None  # bool [M]; None = none difficult
-    band_top_px: int | None = None  # from the frame's calibration (horizon), when known
     ground: GroundCamera | None = None  # the frame's calibration, when known
 
     def difficult_mask(self) -> np.ndarray:
@@ -136,18 +135,6 @@ def vehicle_from_camera_rotation(pose: dict) -> np.ndarray:
     else:
         body = rotation_from_rpy(*map(float, pose["rotation"]["rpy_rad"]))
     return body @ OPTICAL_TO_VEHICLE
-
-
-def horizon_from_calibration(camera_info: Path, extrinsics: Path) -> float:
-    """The horizon row of a frame from its camera_info and extrinsics YAML (renderer format)."""
-    try:
-        info = yaml.safe_load(camera_info.read_text(encoding="utf-8"))
-        k = info["camera_matrix"]["data"]
-        pose = yaml.safe_load(extrinsics.read_text(encoding="utf-8"))["vehicle_from_camera"]
-        vehicle_from_camera = vehicle_from_camera_rotation(pose)
-    except (OSError, KeyError, TypeError, ValueError, yaml.YAMLError) as err:
-        raise LabelError(extrinsics, f"cannot read the calibration: {err!r}") from err
-    return horizon_row_px(float(k[4]), float(k[5]), vehicle_from_camera.T)
 
 
 def ground_camera_from_calibration(camera_info: Path, extrinsics: Path) -> GroundCamera:
@@ -233,7 +220,6 @@ class RendererFrames:
         image_path, label_path = self.items[index]
         image = read_rgb(image_path)
         height, width = image.shape[:2]
-        band_top = None
         ground = None
         if label_path.suffix == ".json":
             boxes, classes, ranges, difficult, _ = read_json_labels(label_path)
@@ -241,7 +227,6 @@ class RendererFrames:
             camera_info = self.root / "camera_info" / f"{stem}.yaml"
             extrinsics = self.root / "extrinsics" / f"{stem}.yaml"
             if camera_info.is_file() and extrinsics.is_file():
-                band_top = band_top_from(horizon_from_calibration(camera_info, extrinsics))
                 ground = ground_camera_from_calibration(camera_info, extrinsics)
         else:
             yolo = read_yolo_txt(label_path, width, height)
@@ -254,9 +239,7 @@ class RendererFrames:
             classes = np.array([b.class_id for b in yolo], np.int64)
             ranges = np.full(len(yolo), np.nan)
             difficult = np.zeros(len(yolo), bool)
-        return LabelledFrame(
-            image, boxes, classes, ranges, image_path.stem, difficult, band_top, ground
-        )
+        return LabelledFrame(image, boxes, classes, ranges, image_path.stem, difficult, ground)
 
 
 def draw_toy_cone(

@@ -1,17 +1,22 @@
-"""Evaluate a detector (checkpoint or ONNX + card) on labelled renderer frames, or draw its
-detections on unlabelled frames (e.g. the real amz sequence) with a count per frame.
+"""Evaluate a detector (checkpoint or ONNX + card) on labelled frames (renderer folders, or
+real YOLO / Supervisely folders), or draw its detections on unlabelled frames (e.g. the real
+amz sequence) with a count per frame.
 
     python -m conesight_train.detector.evaluate --checkpoint build/train/detector/best.pt \\
         --data out/sim-val --json build/detector-eval.json --png build/detector-eval --png-count 8
     python -m conesight_train.detector.evaluate --onnx models/detector.onnx \\
-        --images ../shared/data/real-dev/amz-sequence --png build/amz [--band-top 420]
+        --data yolo:../shared/data/real-train/fsoco-boxes/test --json build/real-test.json
+    python -m conesight_train.detector.evaluate --onnx models/detector.onnx \\
+        --images ../shared/data/real-dev/amz-sequence --png build/amz
 
 Labelled: AP@0.5 per class and mAP, precision and recall at the card's score threshold,
-recall by distance band and within 20 m, over cones within the 30 m working range (difficult
-and farther cones excluded, farther ones still get their band; see `metrics.py`), then the same
-over all ranges.
-Drawn PNGs show the band (grey lines), each detection (class colour, score) and, when
-labelled, missed truths (white).
+recall by distance band and within 20 m (rendered frames, which have ranges: cones within the
+30 m working range; difficult and farther cones excluded, farther ones still get their band;
+see `metrics.py`), recall by box height (< 20, 20-40, >= 40 px); then the same over all ranges.
+Real frames have no ranges: every labelled cone counts (`unknown_cone` is an ignore region).
+Drawn PNGs show each detection (class colour, score) and, when labelled, missed truths (white).
+`--shift F` moves every frame down by F of its height (up when negative; the uncovered rows
+grey), as a camera pitched up (down) would see it, with no calibration given.
 """
 
 from __future__ import annotations
@@ -29,8 +34,9 @@ import torch
 from tqdm import tqdm
 
 from conesight_train.detector.augment import to_input
-from conesight_train.detector.band import BandParams
-from conesight_train.detector.data import IMAGE_SUFFIXES, LabelledFrame, RendererFrames, read_rgb
+from conesight_train.detector.config import open_source
+from conesight_train.detector.data import IMAGE_SUFFIXES, FrameSource, LabelledFrame, read_rgb
+from conesight_train.detector.frame_input import FILL, FrameInputParams
 from conesight_train.detector.metrics import WORKING_RANGE_M, ImageResult, evaluate, match
 from conesight_train.detector.model import CLASS_NAMES, ExportHead
 from conesight_train.detector.postprocess import Thresholds
@@ -44,7 +50,7 @@ CLASS_BGR = ((255, 90, 0), (0, 220, 255), (0, 120, 255), (0, 60, 200))
 Runner = Callable[[np.ndarray], np.ndarray]
 
 
-def torch_runner(checkpoint: Path) -> tuple[Runner, BandParams, Thresholds]:
+def torch_runner(checkpoint: Path) -> tuple[Runner, FrameInputParams, Thresholds]:
     """A checkpoint's model as input [1, 3, H, W] -> output [4 + C, N]."""
     from conesight_train.detector.train import model_from_checkpoint
 
@@ -55,10 +61,10 @@ def torch_runner(checkpoint: Path) -> tuple[Runner, BandParams, Thresholds]:
         with torch.no_grad():
             return head(torch.from_numpy(x)).numpy()[0]
 
-    return run, config.band, config.thresholds
+    return run, config.input, config.thresholds
 
 
-def onnx_runner(path: Path, threads: int) -> tuple[Runner, BandParams, Thresholds]:
+def onnx_runner(path: Path, threads: int) -> tuple[Runner, FrameInputParams, Thresholds]:
     """An exported model and its card."""
     card_path = path.with_suffix(".card.json")
     if not card_path.is_file():
@@ -72,17 +78,36 @@ def onnx_runner(path: Path, threads: int) -> tuple[Runner, BandParams, Threshold
     def run(x: np.ndarray) -> np.ndarray:
         return sess.run(None, {name: x})[0][0]
 
-    return run, BandParams(**card["band"]), Thresholds(**card["thresholds"])
+    return run, FrameInputParams(**card["frame_input"]), Thresholds(**card["thresholds"])
 
 
-def draw(
-    frame: LabelledFrame, dets: np.ndarray, top_px: int, band: BandParams, missed: np.ndarray
-) -> np.ndarray:
-    """BGR image with the band, detections and missed truths."""
+def shift_frame(frame: LabelledFrame, fraction: float) -> LabelledFrame:
+    """`frame` moved down by `fraction` of its height (up when negative), the uncovered rows
+    grey; boxes moved with it, cut at the frame's edge, and dropped (with their labels) when
+    less than half of a box stays inside: what a camera pitched by that much would see."""
+    h, w = frame.image_rgb.shape[:2]
+    dy = round(fraction * h)
+    image = np.full_like(frame.image_rgb, FILL)
+    if dy >= 0:
+        image[dy:] = frame.image_rgb[: h - dy]
+    else:
+        image[: h + dy] = frame.image_rgb[-dy:]
+    boxes = frame.boxes_px + np.array([0.0, dy, 0.0, dy])
+    clipped = np.clip(boxes, 0, [w, h, w, h])
+    inside = (clipped[:, 3] - clipped[:, 1]) >= 0.5 * (boxes[:, 3] - boxes[:, 1])
+    return LabelledFrame(
+        image,
+        clipped[inside],
+        frame.classes[inside],
+        frame.range_m[inside],
+        f"{frame.name}_shift{fraction:+g}",
+        frame.difficult_mask()[inside],
+    )
+
+
+def draw(frame: LabelledFrame, dets: np.ndarray, missed: np.ndarray) -> np.ndarray:
+    """BGR image with the detections and missed truths."""
     image = np.ascontiguousarray(frame.image_rgb[:, :, ::-1])
-    width = image.shape[1]
-    for row in (top_px, top_px + band.band_height_px - 1):
-        cv2.line(image, (0, row), (width - 1, row), (160, 160, 160), 1)
     for box in frame.boxes_px[missed]:
         x0, y0, x1, y1 = np.round(box).astype(int)
         cv2.rectangle(image, (x0, y0), (x1, y1), (255, 255, 255), 2)
@@ -97,21 +122,24 @@ def draw(
 
 
 def run_frames(
-    frames: list[LabelledFrame] | RendererFrames,
+    frames: list[LabelledFrame] | FrameSource,
     runner: Runner,
-    band: BandParams,
+    input_params: FrameInputParams,
     thresholds: Thresholds,
     png_dir: Path | None,
     png_count: int,
+    shift: float = 0.0,
 ) -> list[ImageResult]:
     """Detections (down to AP_SCORE_FLOOR) per frame; draws the first `png_count` frames."""
     low = replace(thresholds, score_threshold=min(AP_SCORE_FLOOR, thresholds.score_threshold))
     results = []
     for i in tqdm(range(len(frames)), desc="frames"):
         frame = frames[i]
-        sample = to_input(frame, band)
+        if shift:
+            frame = shift_frame(frame, shift)
+        sample = to_input(frame, input_params)
         out = runner(sample.image[None])
-        dets = detections_in_frame(out, band, sample.top_px, low)
+        dets = detections_in_frame(out, sample.scale_xy, low)
         result = frame_result(frame, dets)
         results.append(result)
         if png_dir is not None and i < png_count:
@@ -124,22 +152,19 @@ def run_frames(
             png_dir.mkdir(parents=True, exist_ok=True)
             cv2.imwrite(
                 str(png_dir / f"{frame.name}.png"),
-                draw(frame, shown, sample.top_px, band, missed),
+                draw(frame, shown, missed),
             )
     return results
 
 
-def unlabelled_frames(folder: Path, band_top_px: int | None) -> list[LabelledFrame]:
+def unlabelled_frames(folder: Path) -> list[LabelledFrame]:
     """Every image of a folder, without labels."""
     paths = sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
     if not paths:
         raise SystemExit(f"{folder}: no images")
     empty = np.zeros((0, 4))
     return [
-        LabelledFrame(
-            read_rgb(p), empty, np.zeros(0, np.int64), np.zeros(0), p.stem, None, band_top_px
-        )
-        for p in paths
+        LabelledFrame(read_rgb(p), empty, np.zeros(0, np.int64), np.zeros(0), p.stem) for p in paths
     ]
 
 
@@ -152,6 +177,9 @@ def print_metrics(metrics: dict[str, object]) -> None:
     for name, row in metrics["per_class"].items():  # type: ignore[union-attr]
         print(f"  {name:<13} AP@0.5 {row['ap50']:.3f}  ({row['truths']} cones)")
     for band, row in metrics["recall_by_range"].items():  # type: ignore[union-attr]
+        if row["truths"]:
+            print(f"  {band:<9} recall {row['recall']:.3f}  ({row['truths']} cones)")
+    for band, row in metrics["recall_by_height"].items():  # type: ignore[union-attr]
         print(f"  {band:<9} recall {row['recall']:.3f}  ({row['truths']} cones)")
 
 
@@ -162,10 +190,12 @@ def main(argv: list[str] | None = None) -> None:
     model.add_argument("--checkpoint", type=Path)
     model.add_argument("--onnx", type=Path)
     data = parser.add_mutually_exclusive_group(required=True)
-    data.add_argument("--data", type=Path, help="labelled renderer folder")
+    data.add_argument(
+        "--data", help="labelled frames: renderer folder, yolo:SPLIT_DIR or supervisely:DIR"
+    )
     data.add_argument("--images", type=Path, help="folder of unlabelled frames")
     parser.add_argument("--limit", type=int)
-    parser.add_argument("--band-top", type=int, help="band's first row for unlabelled frames")
+    parser.add_argument("--shift", type=float, default=0.0, help="move frames by this fraction")
     parser.add_argument("--json", type=Path)
     parser.add_argument("--png", type=Path, help="folder for annotated frames")
     parser.add_argument("--png-count", type=int, default=1000)
@@ -183,12 +213,14 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_args(argv)
     torch.set_num_threads(args.threads)
     if args.checkpoint:
-        runner, band, thresholds = torch_runner(args.checkpoint)
+        runner, input_params, thresholds = torch_runner(args.checkpoint)
     else:
-        runner, band, thresholds = onnx_runner(args.onnx, args.threads)
+        runner, input_params, thresholds = onnx_runner(args.onnx, args.threads)
     if args.data:
-        source = RendererFrames(args.data, args.limit)
-        results = run_frames(source, runner, band, thresholds, args.png, args.png_count)
+        source = open_source(args.data, args.limit)
+        results = run_frames(
+            source, runner, input_params, thresholds, args.png, args.png_count, args.shift
+        )
         if args.count_far_detections:
             results = [replace(r, detection_range_m=None) for r in results]
         report: dict[str, object] = evaluate(results, CLASS_NAMES, thresholds.score_threshold)
@@ -211,8 +243,8 @@ def main(argv: list[str] | None = None) -> None:
                 print(f"  score >= {t:g}: precision {p:.3f}  recall {r:.3f}  F1 {f1:.3f}")
             report["score_sweep"] = sweep
     else:
-        frames = unlabelled_frames(args.images, args.band_top)[: args.limit]
-        results = run_frames(frames, runner, band, thresholds, args.png, args.png_count)
+        frames = unlabelled_frames(args.images)[: args.limit]
+        results = run_frames(frames, runner, input_params, thresholds, args.png, args.png_count)
         counts = {}
         for frame, result in zip(frames, results, strict=True):
             shown = result.detections[result.detections[:, 4] >= thresholds.score_threshold]

@@ -1,10 +1,7 @@
 """Detector loss: CenterNet's penalty-reduced focal loss on the heatmaps, and box regression
 (offsets, log height, log aspect): L1 at the object centres (CenterNet), or with
 `LossParams.dense` L1 and GIoU over each object's dense-regression cells (TTFNet; see
-`targets.py`), each object weighing 1. With the size head (model.py) the orange and large
-orange heatmap targets merge into one orange-family map, and the "large" logit gets a
-class-balanced binary cross-entropy over the family's dense cells (large and small cells each
-weigh half), whatever the share of large cones in the batch."""
+`targets.py`), each object weighing 1."""
 
 from __future__ import annotations
 
@@ -25,7 +22,6 @@ class LossParams:
     regression_weight: float = 1.0
     dense: bool = False
     giou_weight: float = 0.0
-    size_weight: float = 1.0
 
     def to_dict(self) -> dict[str, object]:
         """The fields for checkpoints and cards."""
@@ -39,7 +35,6 @@ class DetectorLoss:
     total: torch.Tensor
     heat: torch.Tensor
     regression: torch.Tensor
-    size: torch.Tensor | None = None
 
 
 def focal_loss(logits: torch.Tensor, target: torch.Tensor, ignore: torch.Tensor) -> torch.Tensor:
@@ -86,16 +81,7 @@ def detector_loss(
 ) -> DetectorLoss:
     """Loss of a batch; `targets` holds the stacked `DetectorTargets` fields."""
     p = params or LossParams()
-    heat_target = targets["heat"]
-    size = None
-    if regression.shape[1] == 5:
-        family = torch.maximum(heat_target[:, 2:3], heat_target[:, 3:4])
-        heat_target = torch.cat([heat_target[:, :2], family], dim=1)
-        size = size_loss(regression[:, 4], targets)
-        regression = regression[:, :4]
-    heat = focal_loss(heat_logits, heat_target, targets["ignore"])
-    if size is not None:
-        heat = heat + p.size_weight * size
+    heat = focal_loss(heat_logits, targets["heat"], targets["ignore"])
     if p.dense:
         weight = targets["dense_weight"]
         objects = weight.sum().clamp_min(1.0)
@@ -106,7 +92,7 @@ def detector_loss(
             owned = weight > 0
             g = giou(decode_boxes(regression), decode_boxes(dense))
             reg = reg + p.giou_weight * ((1 - g) * weight * owned).sum() / objects
-        return DetectorLoss(heat + reg, heat, reg, size)
+        return DetectorLoss(heat + reg, heat, reg)
     n = regression.shape[0]
     index = targets["index"]
     gathered = torch.gather(
@@ -115,18 +101,4 @@ def detector_loss(
     mask = targets["mask"].unsqueeze(-1)
     reg = (torch.abs(gathered - targets["regression"]) * mask).sum() / mask.sum().clamp_min(1.0)
     reg = p.regression_weight * reg
-    return DetectorLoss(heat + reg, heat, reg, size)
-
-
-def size_loss(large_logits: torch.Tensor, targets: dict[str, torch.Tensor]) -> torch.Tensor:
-    """Class-balanced BCE of the "large" logit [N, h, w] over the orange family's dense cells."""
-    cls = targets["dense_class"]
-    weight = targets["dense_weight"]
-    bce = torch.nn.functional.binary_cross_entropy_with_logits(
-        large_logits, (cls == 3).to(large_logits.dtype), reduction="none"
-    )
-    total = large_logits.new_zeros(())
-    for c in (2, 3):
-        w = weight * (cls == c).to(weight.dtype)
-        total = total + 0.5 * (bce * w).sum() / w.sum().clamp_min(1e-6)
-    return total
+    return DetectorLoss(heat + reg, heat, reg)

@@ -26,6 +26,14 @@ DISTANCE_BANDS_M: tuple[tuple[float, float], ...] = (
     (30.0, float("inf")),
 )
 
+# Box-height bands (frame pixels) for recall on real frames, which have no ranges: the
+# issue's "cones at least 20 px tall", and the small ones below.
+HEIGHT_BANDS_PX: tuple[tuple[float, float], ...] = (
+    (0.0, 20.0),
+    (20.0, 40.0),
+    (40.0, float("inf")),
+)
+
 # The target's "cones within 20 m".
 NEAR_RANGE_M = 20.0
 # The pipeline's working range: the headline numbers (mAP, precision, recall) count cones up to
@@ -106,7 +114,8 @@ def evaluate(
     max_range_m: float | None = WORKING_RANGE_M,
 ) -> dict[str, object]:
     """AP per class and mAP over classes with truths; P/R at `score_threshold`; recall by
-    distance band (truths with a finite range), all at `iou_threshold`.
+    distance band (truths with a finite range) and by box height (frame pixels), all at
+    `iou_threshold`.
 
     Truths beyond `max_range_m` (None: no limit) are left out of AP, P and R like difficult
     ones, but still get their recall band; so are unmatched detections whose
@@ -117,6 +126,8 @@ def evaluate(
     truths_by_class = np.zeros(len(class_names), np.int64)
     band_found = np.zeros(len(DISTANCE_BANDS_M), np.int64)
     band_total = np.zeros(len(DISTANCE_BANDS_M), np.int64)
+    height_found = np.zeros(len(HEIGHT_BANDS_PX), np.int64)
+    height_total = np.zeros(len(HEIGHT_BANDS_PX), np.int64)
     tp = fp = fn = 0
     near_found = near_total = 0
     for image in images:
@@ -157,6 +168,11 @@ def evaluate(
             in_band = (ranges >= lo) & (ranges < hi)
             band_total[b] += int(np.sum(in_band))
             band_found[b] += int(np.sum(found & in_band))
+        heights = image.truth_boxes[:, 3] - image.truth_boxes[:, 1]
+        for b, (lo, hi) in enumerate(HEIGHT_BANDS_PX):
+            in_band = (heights >= lo) & (heights < hi) & ~hard
+            height_total[b] += int(np.sum(in_band))
+            height_found[b] += int(np.sum(found & in_band))
     aps = []
     for c, name in enumerate(class_names):
         ap = average_precision(
@@ -174,6 +190,14 @@ def evaluate(
         }
         for b, (lo, hi) in enumerate(DISTANCE_BANDS_M)
     }
+    heights = {
+        (f"{lo:g}-{hi:g} px" if np.isfinite(hi) else f">= {lo:g} px"): {
+            "truths": int(height_total[b]),
+            "recall": float(height_found[b] / height_total[b]) if height_total[b] else float("nan"),
+        }
+        for b, (lo, hi) in enumerate(HEIGHT_BANDS_PX)
+    }
+    tall = height_total[1:].sum()
     return {
         "map50": float(np.mean(aps)) if aps else float("nan"),
         "precision": tp / (tp + fp) if tp + fp else float("nan"),
@@ -183,5 +207,7 @@ def evaluate(
         "max_range_m": max_range_m,
         "per_class": per_class,
         "recall_by_range": bands,
+        "recall_by_height": heights,
+        "recall_at_least_20px": float(height_found[1:].sum() / tall) if tall else float("nan"),
         "recall_within_20m": near_found / near_total if near_total else float("nan"),
     }

@@ -1,7 +1,10 @@
 """The cone detector: a light residual/separable encoder to stride 32, a top-down path to
 stride 4, and CenterNet-style heads with a tall box prior.
 
-Input: float32 [N, 3, H, W] RGB, raw 0..255 (the band of `band.py`), H and W multiples of 32.
+Input: float32 [N, 3, H, W] RGB, raw 0..255 (the whole frame, `frame_input.py`; training takes
+crops of any size), H and W multiples of 32. Nothing in the network depends on the row, so a
+cone looks the same to it wherever it stands in the frame: a pitched camera, a different mount
+or a bump moves cones in the image, not out of the detector's view.
 `forward` returns (heat_logits [N, C, H/4, W/4], regression [N, 4, H/4, W/4]) where the
 regression channels are (dx, dy, log_h, log_aspect) per cell:
 
@@ -13,17 +16,6 @@ ASPECT_PRIOR (width / height) is the box prior: cones are taller than wide (smal
 228 x 325 mm, large 285 x 505 mm; boxes with the base plate 0.4-0.95, median ~0.7), so an
 untrained or uncertain head still predicts tall boxes, and the heatmap targets are Gaussians
 elongated the same way (`targets.py`).
-
-Size head (`DetectorParams.size_head`): orange and large orange cones differ mainly in size
-(505 vs 325 mm; two stripes instead of one), and large ones are ~3 % of the cones, so with a
-heatmap each they split their evidence and the rare class stays weak. With the size head the
-heatmaps are blue, yellow and *orange-family* (both orange classes), and a fifth regression
-channel is a "large" logit, predicted from the features, the cell's predicted box height
-(log_h, detached) and its row: on flat ground a cone's pixel height over its base row's
-distance below the horizon is its height over the camera's, which tells 505 from 325 mm for
-any mount of 0.75-1.25 m except a narrow overlap. The export splits the family's score
-into orange = heat (1 - p_large) and large orange = heat p_large, so the output layout and
-the decoder are unchanged.
 
 `ExportHead` wraps the network for ONNX: one output `detections [N, 4 + C, H/4 * W/4]`, the
 Ultralytics layout (cx, cy, w, h in continuous input pixels, then per-class scores). Scores are
@@ -61,18 +53,6 @@ class DetectorParams:
     stage_channels: tuple[int, int, int, int] = (24, 48, 64, 96)  # strides 4, 8, 16, 32
     stage_blocks: tuple[int, int, int, int] = (1, 2, 2, 2)
     neck_channels: int = 32
-    # Rows as a feature: (y, y^2) of each stride-4 cell, through a 1x1 conv, added to the
-    # finest features before the heads. The band starts a fixed distance above the horizon, so
-    # the row says how far a cone standing there is and so how tall it should be: the cue
-    # that tells a large orange cone from a near small one.
-    row_features: bool = False
-    # Orange-family heatmap + a "large" logit instead of two orange heatmaps (module docs).
-    size_head: bool = False
-
-    @property
-    def heat_channels(self) -> int:
-        """Heatmaps the network outputs: the classes, or 3 with the size head."""
-        return self.class_count - 1 if self.size_head else self.class_count
 
     def to_dict(self) -> dict[str, object]:
         """Keyword arguments that rebuild these params (for checkpoints and cards)."""
@@ -84,14 +64,20 @@ class DetectorParams:
     @staticmethod
     def from_dict(d: dict[str, object]) -> DetectorParams:
         """Inverse of `to_dict`."""
+        known = {"class_count", "stem_channels", "stage_channels", "stage_blocks", "neck_channels"}
+        unknown = set(d) - known
+        if unknown:
+            raise ValueError(
+                f"detector model settings {sorted(unknown)} are not supported (row features and "
+                "the size head belonged to the horizon-band detector); known: "
+                f"{sorted(known)}"
+            )
         return DetectorParams(
             class_count=int(d["class_count"]),  # type: ignore[arg-type]
             stem_channels=int(d["stem_channels"]),  # type: ignore[arg-type]
             stage_channels=tuple(d["stage_channels"]),  # type: ignore[arg-type]
             stage_blocks=tuple(d["stage_blocks"]),  # type: ignore[arg-type]
             neck_channels=int(d["neck_channels"]),  # type: ignore[arg-type]
-            row_features=bool(d.get("row_features", False)),
-            size_head=bool(d.get("size_head", False)),
         )
 
 
@@ -155,23 +141,8 @@ class ConeDetector(nn.Module):
         self.smooth16 = SeparableBlock(d, d)
         self.smooth8 = SeparableBlock(d, d)
         self.smooth4 = SeparableBlock(d, d)
-        self.row_embed = nn.Conv2d(2, d, 1) if p.row_features else None
-        if p.size_head and p.class_count != len(CLASS_NAMES):
-            raise ValueError("the size head needs the 4 cone classes (the last two orange)")
-        self.heat_head = _separable_head(d, p.heat_channels)
+        self.heat_head = _separable_head(d, p.class_count)
         self.reg_head = _separable_head(d, 4)
-        # Size head: features + (log_h, y, y^2) -> "large" logit (module docs).
-        self.size_head = (
-            nn.Sequential(
-                nn.Conv2d(d + 3, d, 1),
-                nn.ReLU(inplace=True),
-                nn.Conv2d(d, d, 3, 1, 1, groups=d),
-                nn.ReLU(inplace=True),
-                nn.Conv2d(d, 1, 1),
-            )
-            if p.size_head
-            else None
-        )
         init_weights(self)
         heat_out = self.heat_head[-1]
         reg_out = self.reg_head[-1]
@@ -180,18 +151,13 @@ class ConeDetector(nn.Module):
             # image; He init here gave logits up to +30 on rendered frames and a loss of ~600.
             nn.init.normal_(heat_out.weight, 0.0, 0.01)
             nn.init.constant_(heat_out.bias, HEAT_BIAS_INIT)
-        if self.size_head is not None:
-            size_out = self.size_head[-1]
-            if isinstance(size_out, nn.Conv2d) and size_out.bias is not None:
-                nn.init.normal_(size_out.weight, 0.0, 0.01)
-                nn.init.zeros_(size_out.bias)
         if isinstance(reg_out, nn.Conv2d) and reg_out.bias is not None:
             nn.init.normal_(reg_out.weight, 0.0, 0.01)
             with torch.no_grad():
                 reg_out.bias.copy_(torch.tensor([0.0, 0.0, LOG_H_BIAS_INIT, 0.0]))
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """(heat_logits [N, heat_channels, h, w], regression [N, 4 (+1 large logit), h, w])."""
+        """(heat_logits [N, classes, h, w], regression [N, 4, h, w])."""
         f4 = self.stage4(self.stem(self.normalise(x)))
         f8 = self.stage8(f4)
         f16 = self.stage16(f8)
@@ -199,16 +165,7 @@ class ConeDetector(nn.Module):
         p16 = self.smooth16(F.interpolate(self.lat32(f32), scale_factor=2.0) + self.lat16(f16))
         p8 = self.smooth8(F.interpolate(p16, scale_factor=2.0) + self.lat8(f8))
         p4 = self.smooth4(F.interpolate(p8, scale_factor=2.0) + self.lat4(f4))
-        h = p4.shape[2]
-        y = (torch.arange(h, dtype=p4.dtype, device=p4.device) + 0.5) / h
-        rows = torch.stack([y, y * y]).view(1, 2, h, 1).expand(p4.shape[0], 2, h, p4.shape[3])
-        if self.row_embed is not None:
-            p4 = p4 + self.row_embed(rows)
-        heat, reg = self.heat_head(p4), self.reg_head(p4)
-        if self.size_head is not None:
-            cues = torch.cat([p4, reg[:, 2:3].detach(), rows], dim=1)
-            reg = torch.cat([reg, self.size_head(cues)], dim=1)
-        return heat, reg
+        return self.heat_head(p4), self.reg_head(p4)
 
 
 def decode_boxes(regression: torch.Tensor) -> torch.Tensor:
@@ -223,18 +180,11 @@ def decode_boxes(regression: torch.Tensor) -> torch.Tensor:
     return torch.stack([cx, cy, width, height], dim=1)
 
 
-def peak_scores(heat_logits: torch.Tensor, regression: torch.Tensor | None = None) -> torch.Tensor:
-    """Class scores [N, C, h, w]: sigmoid(heat), zero except at 3x3 local maxima of each map;
-    with the size head (`heat_logits` of 3 maps, pass its 5-channel `regression`), the
-    orange-family peaks are split into orange and large orange by p_large (module docs)."""
+def peak_scores(heat_logits: torch.Tensor) -> torch.Tensor:
+    """Class scores [N, C, h, w]: sigmoid(heat), zero except at 3x3 local maxima of each map."""
     heat = torch.sigmoid(heat_logits)
     keep = (F.max_pool2d(heat, 3, stride=1, padding=1) == heat).to(heat.dtype)
-    peaks = heat * keep
-    if regression is None:
-        return peaks
-    p_large = torch.sigmoid(regression[:, 4:5])
-    family = peaks[:, 2:3]
-    return torch.cat([peaks[:, :2], family * (1 - p_large), family * p_large], dim=1)
+    return heat * keep
 
 
 class ExportHead(nn.Module):
@@ -246,8 +196,8 @@ class ExportHead(nn.Module):
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         heat, reg = self.detector(x)
-        boxes = decode_boxes(reg[:, :4])
-        scores = peak_scores(heat, reg if self.detector.size_head is not None else None)
+        boxes = decode_boxes(reg)
+        scores = peak_scores(heat)
         n = x.shape[0]
         return (
             torch.cat([boxes, scores], dim=1)

@@ -1,5 +1,8 @@
 """ONNX export of the detector (opset 17, `ExportHead` output), the ONNX Runtime vs PyTorch
-check, and the model card (`NAME.card.json`, read by crates/conesight-detect).
+check, and the model card (`NAME.card.json`, read by crates/conesight-detect). The ONNX file
+also carries what the runtime needs in its metadata (`conesight_layout`, `names`, `imgsz`, and
+`score_threshold`, `nms_iou`, `max_detections`; `names` and `imgsz` as Ultralytics writes
+them), so the model runs without its card.
 
     python -m conesight_train.detector.onnx_export --checkpoint build/train/detector/best.pt \
         --out models/detector.onnx [--metrics eval.json]
@@ -14,11 +17,13 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
+import onnx
 import onnxruntime as ort
 import torch
 
-from conesight_train.detector.band import BandParams
+from conesight_train.detector.frame_input import FrameInputParams
 from conesight_train.detector.model import CLASS_NAMES, ConeDetector, ExportHead
+from conesight_train.detector.postprocess import Thresholds
 
 INPUT_NAME = "image"
 OUTPUT_NAME = "detections"
@@ -29,12 +34,21 @@ BOX_TOLERANCE_PX = 1e-2
 SCORE_TOLERANCE = 1e-4
 
 
-def export_onnx(model: ConeDetector, path: str | Path, band: BandParams) -> None:
-    """Writes the eval-mode detector with its decoding head; batch size 1, fixed input size."""
+LAYOUT = "conesight_frame"
+
+
+def export_onnx(
+    model: ConeDetector,
+    path: str | Path,
+    input_params: FrameInputParams,
+    thresholds: Thresholds | None = None,
+) -> None:
+    """Writes the eval-mode detector with its decoding head (batch size 1, fixed input size)
+    and the metadata the runtime reads (module docs)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     head = ExportHead(model).eval()
-    dummy = torch.zeros(1, 3, band.input_height_px, band.input_width_px)
+    dummy = torch.zeros(1, 3, input_params.input_height_px, input_params.input_width_px)
     torch.onnx.export(
         head,
         (dummy,),
@@ -44,6 +58,19 @@ def export_onnx(model: ConeDetector, path: str | Path, band: BandParams) -> None
         opset_version=OPSET,
         dynamo=False,
     )
+    proto = onnx.load(str(path))
+    t = thresholds or Thresholds()
+    metadata = {
+        "conesight_layout": LAYOUT,
+        # Ultralytics' spelling: a Python dict literal and [height, width].
+        "names": repr(dict(enumerate(CLASS_NAMES))),
+        "imgsz": repr([input_params.input_height_px, input_params.input_width_px]),
+        "score_threshold": repr(t.score_threshold),
+        "nms_iou": repr(t.nms_iou),
+        "max_detections": repr(t.max_detections),
+    }
+    onnx.helper.set_model_props(proto, metadata)
+    onnx.save(proto, str(path))
 
 
 @dataclass(frozen=True)
@@ -89,16 +116,16 @@ def model_card(
     path: Path, config_dict: dict[str, object], parity: Parity, metrics: dict[str, object] | None
 ) -> dict[str, object]:
     """The card written next to the model (read by crates/conesight-detect)."""
-    band = config_dict["band"]
+    frame_input = config_dict["input"]
     return {
-        "format": "conesight-detector-card-v1",
+        "format": "conesight-detector-card-v2",
         "model": path.name,
         "sha256": hashlib.sha256(path.read_bytes()).hexdigest(),
         "bytes": path.stat().st_size,
-        "layout": "conesight_band",
+        "layout": LAYOUT,
         "input": {
             "name": INPUT_NAME,
-            "shape": [1, 3, band["input_height_px"], band["input_width_px"]],  # type: ignore[index]
+            "shape": [1, 3, frame_input["input_height_px"], frame_input["input_width_px"]],  # type: ignore[index]
             "dtype": "float32",
             "values": "RGB, raw 0..255 (normalised inside the graph)",
         },
@@ -108,10 +135,10 @@ def model_card(
             "values": "cx, cy, w, h in continuous input pixels, then per-class scores "
             "(sigmoid at 3x3 heatmap peaks, 0 elsewhere)",
         },
-        "preprocessing": "band rows [top, top + factor * input_height) of the frame, top = "
-        "band_top_px clamped into the frame, each input pixel the mean of a factor x factor "
-        "block; frame width must be factor * input_width",
-        "band": band,
+        "preprocessing": "the whole frame, scale s = min(input_width / width, input_height / "
+        "height), area-resized to round(width s) x round(height s) (bilinear when enlarging), "
+        "placed at the top-left corner, the rest grey 114",
+        "frame_input": frame_input,
         "class_names": list(CLASS_NAMES),
         "thresholds": config_dict["thresholds"],
         "opset": OPSET,
@@ -133,23 +160,23 @@ def main(argv: list[str] | None = None) -> None:
     from conesight_train.detector.train import model_from_checkpoint
 
     model, config, _ = model_from_checkpoint(args.checkpoint)
-    export_onnx(model, args.out, config.band)
-    size = args.out.stat().st_size
-    if size > MAX_MODEL_BYTES:
-        raise SystemExit(f"{args.out}: {size} bytes, over the {MAX_MODEL_BYTES} byte budget")
-    rng = np.random.default_rng(0)
-    inputs = rng.uniform(
-        0, 255, (2, 3, config.band.input_height_px, config.band.input_width_px)
-    ).astype(np.float32)
-    parity = compare_with_pytorch(model, args.out, inputs)
-    if parity.max_box_diff_px > BOX_TOLERANCE_PX or parity.max_score_diff > SCORE_TOLERANCE:
-        raise SystemExit(f"{args.out}: ONNX Runtime disagrees with PyTorch: {parity}")
-    metrics = json.loads(args.metrics.read_text()) if args.metrics else None
     config_dict = config.to_dict()
     if args.score_threshold is not None:
         if not 0.0 < args.score_threshold < 1.0:
             raise SystemExit(f"--score-threshold {args.score_threshold}: expected 0 < t < 1")
         config_dict["thresholds"]["score_threshold"] = args.score_threshold  # type: ignore[index]
+    export_onnx(model, args.out, config.input, Thresholds(**config_dict["thresholds"]))
+    size = args.out.stat().st_size
+    if size > MAX_MODEL_BYTES:
+        raise SystemExit(f"{args.out}: {size} bytes, over the {MAX_MODEL_BYTES} byte budget")
+    rng = np.random.default_rng(0)
+    inputs = rng.uniform(
+        0, 255, (2, 3, config.input.input_height_px, config.input.input_width_px)
+    ).astype(np.float32)
+    parity = compare_with_pytorch(model, args.out, inputs)
+    if parity.max_box_diff_px > BOX_TOLERANCE_PX or parity.max_score_diff > SCORE_TOLERANCE:
+        raise SystemExit(f"{args.out}: ONNX Runtime disagrees with PyTorch: {parity}")
+    metrics = json.loads(args.metrics.read_text()) if args.metrics else None
     card = model_card(args.out, config_dict, parity, metrics)
     card_path = args.out.with_suffix(".card.json")
     card_path.write_text(json.dumps(card, indent=2) + "\n")

@@ -1,4 +1,4 @@
-"""Run the PyTorch detector on frames: band input -> export-layout output -> decoded
+"""Run the PyTorch detector on frames: whole-frame input -> export-layout output -> decoded
 detections in continuous frame pixels (the same rule as the Rust runtime)."""
 
 from __future__ import annotations
@@ -7,20 +7,19 @@ import numpy as np
 import torch
 
 from conesight_train.detector.augment import to_input
-from conesight_train.detector.band import BandParams
 from conesight_train.detector.data import FrameSource, LabelledFrame
+from conesight_train.detector.frame_input import FrameInputParams, boxes_to_frame
 from conesight_train.detector.metrics import ImageResult
 from conesight_train.detector.model import ConeDetector, ExportHead
 from conesight_train.detector.postprocess import Thresholds, decode
 
 
 def detections_in_frame(
-    output: np.ndarray, band: BandParams, top_px: int, thresholds: Thresholds
+    output: np.ndarray, scale_xy: tuple[float, float], thresholds: Thresholds
 ) -> np.ndarray:
-    """Output [4 + C, N] of one band -> detections [D, 6] in continuous frame pixels."""
+    """Output [4 + C, N] of one input -> detections [D, 6] in continuous frame pixels."""
     dets = decode(output, thresholds)
-    dets[:, :4] *= band.factor
-    dets[:, [1, 3]] += top_px
+    dets[:, :4] = boxes_to_frame(dets[:, :4], scale_xy)
     return dets
 
 
@@ -38,7 +37,7 @@ def frame_result(frame: LabelledFrame, detections: np.ndarray) -> ImageResult:
 def predict_frames(
     model: ConeDetector,
     source: FrameSource,
-    band: BandParams,
+    input_params: FrameInputParams,
     thresholds: Thresholds,
     batch_size: int = 4,
 ) -> list[ImageResult]:
@@ -47,12 +46,12 @@ def predict_frames(
     results: list[ImageResult] = []
     for start in range(0, len(source), batch_size):
         frames = [source[i] for i in range(start, min(start + batch_size, len(source)))]
-        samples = [to_input(f, band) for f in frames]
+        samples = [to_input(f, input_params) for f in frames]
         inputs = np.stack([s.image for s in samples])
         with torch.no_grad():
             outputs = head(torch.from_numpy(inputs)).numpy()
         for frame, sample, output in zip(frames, samples, outputs, strict=True):
             results.append(
-                frame_result(frame, detections_in_frame(output, band, sample.top_px, thresholds))
+                frame_result(frame, detections_in_frame(output, sample.scale_xy, thresholds))
             )
     return results

@@ -1,11 +1,13 @@
 """Detector training loop and CLI (`conesight-train-detector`): seeded, tqdm progress, AdamW
-with warm-up and cosine decay, checkpoints (`last.pt` every validation, `best.pt` by val mAP),
-exact resume (`--resume`: model, optimiser, scheduler, step), YAML config with flag overrides.
+with warm-up and cosine decay, random crops drawn from several sources by weight (real and
+rendered frames in one batch, `dataset.MixedDataset`), checkpoints (`last.pt` every validation,
+`best.pt` by val mAP, and `steps/NNNNNN.pt` so the curve of any metric against training time
+can be drawn afterwards), exact resume (`--resume`), YAML config with flag overrides, and an
+optional wall-clock budget (`max_minutes`). The history records wall and CPU seconds.
 
     conesight-train-detector --config training/configs/detector.yaml
     conesight-train-detector --config training/configs/detector.yaml --resume
-    conesight-train-detector --train toy:64 --val toy:16:1 --steps 200 --out build/train/det-smoke \
-        --band-input 128x64 --band-top 32
+    conesight-train-detector --config training/configs/detector-smoke.yaml
 """
 
 from __future__ import annotations
@@ -23,23 +25,17 @@ import torch
 from tqdm import tqdm
 
 from conesight_train import checkpoint
-from conesight_train.detector.cache import CachedFrames, ensure_cache
-from conesight_train.detector.config import TrainConfig, open_source
-from conesight_train.detector.data import FrameSource
-from conesight_train.detector.dataset import DetectorDataset
+from conesight_train.detector.config import SourceSpec, TrainConfig, open_source
+from conesight_train.detector.dataset import MixedDataset
 from conesight_train.detector.loss import detector_loss
 from conesight_train.detector.metrics import evaluate
 from conesight_train.detector.model import CLASS_NAMES, ConeDetector, DetectorParams
 from conesight_train.detector.predict import predict_frames
-from conesight_train.detector.sampling import (
-    class_frame_fractions,
-    epoch_order,
-    frame_classes,
-    repeat_factors,
-)
 from conesight_train.seed import seed_everything
 
-CHECKPOINT_FORMAT = "conesight-detector-v1"
+CHECKPOINT_FORMAT = "conesight-detector-v2"
+# Samples per epoch of the mixed dataset (the unit of reseeding, not a pass over the data).
+EPOCH_SAMPLES = 4096
 # Detections down to this score enter the AP computation.
 AP_SCORE_FLOOR = 0.02
 
@@ -63,11 +59,15 @@ def model_from_checkpoint(path: str | Path) -> tuple[ConeDetector, TrainConfig, 
     return model.eval(), config, state
 
 
-def lr_factor(step: int, config: TrainConfig) -> float:
-    """Linear warm-up, then cosine decay to 5 % over the run."""
+def lr_factor(step: int, config: TrainConfig, elapsed_s: float = 0.0) -> float:
+    """Linear warm-up, then cosine decay to 5 % over the run: over the steps, or over the
+    wall-clock budget (`max_minutes`) when that runs out first, so a run stopped by its budget
+    still ends on a small learning rate."""
     if step < config.warmup_steps:
         return (step + 1) / config.warmup_steps
     progress = (step - config.warmup_steps) / max(1, config.steps - config.warmup_steps)
+    if config.max_minutes > 0:
+        progress = max(progress, elapsed_s / (60 * config.max_minutes))
     return 0.05 + 0.95 * 0.5 * (1 + math.cos(math.pi * min(1.0, progress)))
 
 
@@ -78,8 +78,18 @@ def validate(model: ConeDetector, config: TrainConfig) -> dict[str, object]:
     low = replace(
         config.thresholds, score_threshold=min(AP_SCORE_FLOOR, config.thresholds.score_threshold)
     )
-    results = predict_frames(model, source, config.band, low)
+    results = predict_frames(model, source, config.input, low)
     return evaluate(results, CLASS_NAMES, config.thresholds.score_threshold)
+
+
+def open_sources(specs: list[SourceSpec]) -> list[tuple[object, float]]:
+    """The training sources with their weights (renderer folders through their caches)."""
+    sources = []
+    for spec in specs:
+        source = open_source(spec.path, cache=spec.cache)
+        tqdm.write(f"source {spec.path}: {len(source)} frames, weight {spec.weight}")
+        sources.append((source, spec.weight))
+    return sources
 
 
 def train(config: TrainConfig, resume: bool = False, progress: bool = True) -> dict[str, Any]:
@@ -88,51 +98,48 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True) -> d
     seed_everything(config.seed)
     out = Path(config.out)
     # Channels-last convolutions: 1.5x faster training steps on this CPU (measured, batch 8).
-    model = ConeDetector(config.model).to(memory_format=torch.channels_last)
+    model = ConeDetector(config.model)
+    if config.init_from:
+        init = load_checkpoint(config.init_from)
+        model.load_state_dict(init["model_state"])
+        tqdm.write(f"initialised from {config.init_from} (step {init['step']})")
+    model = model.to(memory_format=torch.channels_last)
     optimizer = torch.optim.AdamW(
         model.parameters(), lr=config.lr, weight_decay=config.weight_decay
     )
-    scheduler = torch.optim.lr_scheduler.LambdaLR(optimizer, lambda s: lr_factor(s, config))
     step, best_map, history = 0, -1.0, []
+    wall_used, cpu_used = 0.0, 0.0
+    t0 = time.perf_counter()
+    scheduler = torch.optim.lr_scheduler.LambdaLR(
+        optimizer, lambda s: lr_factor(s, config, time.perf_counter() - t0)
+    )
     if resume and (out / "last.pt").is_file():
         state = load_checkpoint(out / "last.pt")
         model.load_state_dict(state["model_state"])
         optimizer.load_state_dict(state["optimizer_state"])
         scheduler.load_state_dict(state["scheduler_state"])
         step, best_map, history = state["step"], state["best_map50"], state["history"]
-    if config.train_cache:
-        source: FrameSource = CachedFrames(
-            ensure_cache(config.train, config.train_cache, config.band.factor)
-        )
-    else:
-        source = open_source(config.train)
-    dataset = DetectorDataset(source, config.band, augment=True, seed=config.seed)
-    if len(dataset) == 0:
-        raise ValueError(f"{config.train}: no training frames")
-    factors = np.ones(len(dataset))
-    if config.repeat_factor_threshold > 0:
-        class_sets = [frame_classes(dataset.source, i) for i in range(len(dataset))]
-        factors = repeat_factors(class_sets, len(CLASS_NAMES), config.repeat_factor_threshold)
-        fractions = class_frame_fractions(class_sets, len(CLASS_NAMES))
-        tqdm.write(
-            "repeat-factor sampling: frames per class "
-            + ", ".join(f"{n} {f:.2f}" for n, f in zip(CLASS_NAMES, fractions, strict=True))
-            + f"; mean factor {factors.mean():.2f}, max {factors.max():.2f}"
-        )
-    # Full batches only (a last short batch would skew batch norm), unless the set is tiny.
-    drop_last = len(dataset) >= config.batch_size
-    per_epoch = len(dataset) // config.batch_size if drop_last else 1
+        wall_used, cpu_used = state.get("wall_s", 0.0), state.get("cpu_s", 0.0)
+    dataset = MixedDataset(
+        open_sources(config.sources),  # type: ignore[arg-type]
+        EPOCH_SAMPLES,
+        config.input,
+        config.augment,
+        config.seed,
+    )
+    per_epoch = EPOCH_SAMPLES // config.batch_size
     bar = tqdm(total=config.steps, initial=step, disable=not progress, desc="detector")
-    t0 = time.perf_counter()
-    while step < config.steps:
+    t0, c0 = time.perf_counter() - wall_used, time.process_time() - cpu_used
+    stop = False
+    while step < config.steps and not stop:
         epoch, batch_in_epoch = divmod(step, per_epoch)
         dataset.set_epoch(epoch)
-        order = epoch_order(factors, config.seed, epoch)
+        order = list(range(batch_in_epoch * config.batch_size, EPOCH_SAMPLES))
         loader = torch.utils.data.DataLoader(
-            torch.utils.data.Subset(dataset, order[batch_in_epoch * config.batch_size :]),
+            torch.utils.data.Subset(dataset, order),
             batch_size=config.batch_size,
             num_workers=config.workers,
-            drop_last=drop_last,
+            drop_last=True,
         )
         for images, targets in loader:
             model.train()
@@ -144,17 +151,21 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True) -> d
             optimizer.step()
             scheduler.step()
             step += 1
+            wall, cpu = time.perf_counter() - t0, time.process_time() - c0
             history.append(
                 [
                     step,
                     float(loss.total.detach()),
                     float(loss.heat.detach()),
                     float(loss.regression.detach()),
+                    round(wall, 1),
+                    round(cpu, 1),
                 ]
             )
             bar.update(1)
-            bar.set_postfix(loss=f"{float(loss.total):.3f}", heat=f"{float(loss.heat):.3f}")
-            last = step >= config.steps
+            bar.set_postfix(loss=f"{history[-1][1]:.3f}", heat=f"{history[-1][2]:.3f}")
+            over_budget = config.max_minutes > 0 and wall >= 60 * config.max_minutes
+            last = step >= config.steps or over_budget
             if step % config.val_every == 0 or last:
                 metrics = validate(model, config) if config.val else {}
                 m = float(metrics.get("map50", float("nan")))  # type: ignore[arg-type]
@@ -166,16 +177,21 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True) -> d
                     "step": step,
                     "history": history,
                     "metrics": metrics,
+                    "wall_s": time.perf_counter() - t0,
+                    "cpu_s": time.process_time() - c0,
                 }
                 if not np.isnan(m) and m > best_map:
                     best_map = m
                     save_checkpoint(out / "best.pt", {**state, "best_map50": best_map})
                 save_checkpoint(out / "last.pt", {**state, "best_map50": best_map})
+                slim = {k: v for k, v in state.items() if k != "optimizer_state"}
+                save_checkpoint(out / "steps" / f"{step:06d}.pt", {**slim, "best_map50": best_map})
                 tqdm.write(
-                    f"step {step}: val mAP@0.5 {m:.3f}, P {metrics.get('precision')}, "
-                    f"R {metrics.get('recall')}"
+                    f"step {step} ({wall / 60:.1f} min wall, {cpu / 60:.1f} min CPU): val mAP@0.5 "
+                    f"{m:.3f}, P {metrics.get('precision')}, R {metrics.get('recall')}"
                 )
             if last:
+                stop = over_budget
                 break
     bar.close()
     return {
@@ -183,6 +199,7 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True) -> d
         "history": history,
         "best_map50": best_map,
         "seconds": time.perf_counter() - t0,
+        "cpu_seconds": time.process_time() - c0,
     }
 
 
@@ -190,9 +207,9 @@ def parse_args(argv: list[str] | None) -> tuple[TrainConfig, bool]:
     """Config file, then flag overrides."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--config", type=Path)
-    parser.add_argument("--train")
-    parser.add_argument("--train-cache")
     parser.add_argument("--val")
+    parser.add_argument("--init-from")
+    parser.add_argument("--max-minutes", type=float)
     parser.add_argument("--out")
     parser.add_argument("--steps", type=int)
     parser.add_argument("--batch-size", type=int)
@@ -201,16 +218,19 @@ def parse_args(argv: list[str] | None) -> tuple[TrainConfig, bool]:
     parser.add_argument("--threads", type=int)
     parser.add_argument("--workers", type=int)
     parser.add_argument("--val-every", type=int)
-    parser.add_argument("--repeat-factor-threshold", type=float)
-    parser.add_argument("--band-input", help="WxH of the network input, e.g. 960x384")
-    parser.add_argument("--band-top", type=int, help="first frame row of the band")
+    parser.add_argument(
+        "--source",
+        action="append",
+        help="SPEC[=WEIGHT[=CACHE]] (repeatable; replaces the config's sources), e.g. "
+        "yolo:../shared/data/real-train/fsoco-boxes/train=0.7",
+    )
     parser.add_argument("--resume", action="store_true")
     args = parser.parse_args(argv)
     config = TrainConfig.from_yaml(args.config) if args.config else TrainConfig()
     for name in (
-        "train",
-        "train_cache",
         "val",
+        "init_from",
+        "max_minutes",
         "out",
         "steps",
         "batch_size",
@@ -219,16 +239,17 @@ def parse_args(argv: list[str] | None) -> tuple[TrainConfig, bool]:
         "threads",
         "workers",
         "val_every",
-        "repeat_factor_threshold",
     ):
         value = getattr(args, name)
         if value is not None:
             setattr(config, name, value)
-    if args.band_input:
-        w, h = (int(v) for v in args.band_input.lower().split("x"))
-        config.band = replace(config.band, input_width_px=w, input_height_px=h)
-    if args.band_top is not None:
-        config.band = replace(config.band, band_top_px=args.band_top)
+    if args.source:
+        specs = []
+        for text in args.source:
+            path, *rest = text.split("=")
+            weight = float(rest[0]) if rest else 1.0
+            specs.append(SourceSpec(path, weight, rest[1] if len(rest) > 1 else ""))
+        config.sources = specs
     return config, args.resume
 
 
