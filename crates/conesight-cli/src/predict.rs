@@ -1,11 +1,15 @@
 //! `conesight predict`: the full pipeline in-process on image files, one JSON object per line;
-//! `--boxes` replaces the detector with given boxes (YOLO txt or KITTI labels).
+//! `--boxes` replaces the detector with given boxes (YOLO txt or KITTI labels); `--detector`
+//! takes conesight's detector or an Ultralytics YOLO export as it comes. Without `--camera`
+//! each image gets a nominal pinhole camera of its own size (ASSUMED_HFOV_DEG), so detections
+//! and keypoints are exact and ranges only as right as that guess.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use conesight_core::{Camera, Extrinsics};
+use conesight_detect::EgoMask;
 use conesight_onnx::ModelOptions;
 use conesight_pipeline::boxes::read_boxes;
 use conesight_pipeline::source::read_image;
@@ -17,9 +21,10 @@ use serde_json::{Value, json};
 /// Arguments of `conesight predict`.
 #[derive(Debug, clap::Args)]
 pub struct PredictArgs {
-    /// ROS camera_info YAML of the camera that took the images.
+    /// ROS camera_info YAML of the camera that took the images (default: a pinhole camera of
+    /// each image's size with a 60-degree horizontal field of view; ranges are then a guess).
     #[arg(long)]
-    camera: PathBuf,
+    camera: Option<PathBuf>,
     /// Extrinsics YAML (`vehicle_from_camera`); default: the paper's mounting (1 m high,
     /// level). Adds `position_vehicle_m` to each cone.
     #[arg(long)]
@@ -30,9 +35,16 @@ pub struct PredictArgs {
     /// 3 large_orange) or KITTI label lines with FSOCO class names.
     #[arg(long)]
     boxes: Option<PathBuf>,
-    /// Detector model (default: the checkout's models/detector.onnx).
+    /// Detector model (default: the checkout's models/detector.onnx): conesight's, or an
+    /// Ultralytics YOLO ONNX export as it comes (`yolo export model=best.pt format=onnx`,
+    /// with or without `nms=True`); class names and input size are read from its metadata.
     #[arg(long)]
     detector: Option<PathBuf>,
+    /// Where the car itself shows: detections standing there are dropped. Points
+    /// `"x,y x,y x,y"` in frame pixels (polygons separated by `;`), or a YAML/JSON file with
+    /// `ego_mask_px: [[x, y], ...]`.
+    #[arg(long = "ego-mask")]
+    ego_mask: Option<String>,
     /// Keypoint model (default: the checkout's models/keypoints.onnx).
     #[arg(long = "keypoint-model")]
     keypoint_model: Option<PathBuf>,
@@ -52,8 +64,18 @@ pub struct PredictArgs {
 
 /// Runs `conesight predict`; fails (after processing every image) when any image failed.
 pub fn run(args: &PredictArgs) -> anyhow::Result<()> {
-    let camera = Camera::from_ros_yaml_file(&args.camera)
-        .with_context(|| format!("camera calibration {}", args.camera.display()))?;
+    let camera = match &args.camera {
+        Some(path) => Camera::from_ros_yaml_file(path)
+            .with_context(|| format!("camera calibration {}", path.display()))?,
+        None => {
+            eprintln!(
+                "no --camera: assuming a pinhole camera with a {ASSUMED_HFOV_DEG}-degree \
+                 horizontal field of view for each image (ranges are a guess; pass --camera \
+                 with your calibration YAML)"
+            );
+            Camera::paper_default()
+        }
+    };
     let extrinsics = match &args.extrinsics {
         Some(path) => Extrinsics::from_yaml_file(path)
             .with_context(|| format!("extrinsics {}", path.display()))?,
@@ -69,15 +91,18 @@ pub fn run(args: &PredictArgs) -> anyhow::Result<()> {
             allow_spinning: None,
         },
         on_ground_plane: args.ground_plane,
+        ego_mask: args.ego_mask.as_deref().map(EgoMask::parse).transpose()?,
     };
     let mut pipeline = InProcessPipeline::load(&config, &camera, &extrinsics)?;
+    let assumed_camera = args.camera.is_none();
     let stdout = std::io::stdout();
     let mut out = stdout.lock();
     let mut failed = 0_usize;
     for path in &args.images {
-        let line = match predict_one(&mut pipeline, path, args.boxes.as_deref()) {
+        let line = match predict_one(&mut pipeline, path, args.boxes.as_deref(), assumed_camera) {
             Ok(result) => json!({
                 "image": path.display().to_string(),
+                "detections": detections_json(&result),
                 "cones": cones_json(&result, args.extrinsics.is_some()),
             }),
             Err(error) => {
@@ -96,12 +121,26 @@ pub fn run(args: &PredictArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Horizontal field of view of the camera assumed when no `--camera` is given.
+pub const ASSUMED_HFOV_DEG: f64 = 60.0;
+
+/// A pinhole camera of `width x height` with the assumed field of view.
+pub fn assumed_camera(width_px: u32, height_px: u32) -> Camera {
+    let f_px = f64::from(width_px) / 2.0 / (ASSUMED_HFOV_DEG.to_radians() / 2.0).tan();
+    Camera::pinhole(width_px, height_px, f_px)
+}
+
 fn predict_one(
     pipeline: &mut InProcessPipeline,
     path: &Path,
     boxes: Option<&Path>,
+    assumed: bool,
 ) -> anyhow::Result<FrameResult> {
     let image = read_image(path)?;
+    if assumed {
+        let extrinsics = *pipeline.extrinsics();
+        pipeline.set_calibration(&assumed_camera(image.width(), image.height()), &extrinsics)?;
+    }
     let given = match boxes {
         None => None,
         Some(boxes) => {
@@ -122,6 +161,22 @@ fn matrix_json(m: &Matrix3<f64>) -> Value {
         [m[(1, 0)], m[(1, 1)], m[(1, 2)]],
         [m[(2, 0)], m[(2, 1)], m[(2, 2)]]
     ])
+}
+
+/// Every box the detector kept (or every given box): class, score, box (OpenCV edges).
+pub fn detections_json(result: &FrameResult) -> Vec<Value> {
+    result
+        .detections
+        .iter()
+        .map(|d| {
+            let b = &d.box_px;
+            json!({
+                "class": d.class.as_str(),
+                "score": d.score,
+                "bbox_px": [b.x_min_px, b.y_min_px, b.x_max_px, b.y_max_px],
+            })
+        })
+        .collect()
 }
 
 /// The JSON cones of a frame: every keypoint set, with its position when the PnP placed it.

@@ -82,9 +82,14 @@ pub struct RunArgs {
     /// Where the boxes come from.
     #[arg(long, value_enum, default_value_t = BoxSource::Auto)]
     boxes: BoxSource,
-    /// Detector model (default: the checkout's models/detector.onnx).
+    /// Detector model (default: the checkout's models/detector.onnx), conesight's or an
+    /// Ultralytics YOLO ONNX export as it comes.
     #[arg(long)]
     detector: Option<PathBuf>,
+    /// Where the car itself shows: detections standing there are dropped (points
+    /// `"x,y x,y x,y"` in frame pixels, or a YAML file with `ego_mask_px`).
+    #[arg(long = "ego-mask")]
+    ego_mask: Option<String>,
     /// Keypoint model (default: the checkout's models/keypoints.onnx).
     #[arg(long = "keypoint-model")]
     keypoint_model: Option<PathBuf>,
@@ -198,6 +203,7 @@ async fn run_async(args: RunArgs) -> anyhow::Result<()> {
                 service.model = Some(detector_path.clone());
                 service.onnx_threads = args.onnx_threads;
                 service.onnx_spinning = args.onnx_spinning;
+                service.ego_mask = args.ego_mask.clone();
                 tokio::spawn(async move {
                     conesight_detector_service::run(&service, node, shutdown).await
                 })

@@ -3,10 +3,9 @@
 //!
 //! ```text
 //! cargo run --release -p conesight-detect --example detect_speed -- MODEL.onnx [FRAME.png] \
-//!     [--threads N] [--frames N] [--band-top ROW] [--list]
+//!     [--threads N] [--frames N] [--list]
 //! ```
-//! `--band-top` sets the band's first row (default: the card's); `--list` prints the
-//! detections (class, score, box in frame pixels).
+//! `--list` prints the detections (class, score, box in frame pixels).
 //! Without a frame it uses a 1920x1200 noise frame. A random-init model of the shipped size
 //! comes from `python -m conesight_train.detector.speed --save build/detector-random.onnx`.
 
@@ -23,14 +22,12 @@ fn main() -> anyhow::Result<()> {
     let mut frame_path: Option<PathBuf> = None;
     let mut threads = 1usize;
     let mut frames = 30usize;
-    let mut band_top_px: Option<u32> = None;
     let mut list = false;
     let mut args = std::env::args().skip(1);
     while let Some(arg) = args.next() {
         match arg.as_str() {
             "--threads" => threads = args.next().context("--threads N")?.parse()?,
             "--frames" => frames = args.next().context("--frames N")?.parse()?,
-            "--band-top" => band_top_px = Some(args.next().context("--band-top ROW")?.parse()?),
             "--list" => list = true,
             _ if model.is_none() => model = Some(PathBuf::from(arg)),
             _ if frame_path.is_none() => frame_path = Some(PathBuf::from(arg)),
@@ -43,7 +40,6 @@ fn main() -> anyhow::Result<()> {
             intra_threads: Some(threads),
             ..ModelOptions::default()
         },
-        band_top_px,
         ..DetectorConfig::default()
     };
     let mut detector = Detector::load(&model, &config)?;

@@ -7,7 +7,9 @@
 //! 3. class-aware greedy NMS: best score first, a candidate is dropped when it overlaps a kept
 //!    box of the same class by IoU > `nms_iou`; at most `max_detections` are kept.
 //!
-//! The same rule as `training/conesight_train/detector/postprocess.py`.
+//! The same rule as `training/conesight_train/detector/postprocess.py`. Ultralytics'
+//! end-to-end exports (`[1, N, 6]`, already free of duplicates) go through
+//! [`decode_end2end`] instead.
 
 use conesight_core::ConeClass;
 
@@ -93,6 +95,51 @@ pub fn decode(
         });
     }
     Ok(non_max_suppression(candidates, thresholds))
+}
+
+/// Decodes the NMS-free output of Ultralytics' end-to-end exports, shape `[1, N, 6]`, rows
+/// `(x_min, y_min, x_max, y_max, score, class index)` in input pixels: rows whose class maps
+/// to a cone class and whose score reaches `score_threshold`, best first, at most
+/// `max_detections` (the model has already removed duplicates).
+pub fn decode_end2end(
+    shape: &[usize],
+    data: &[f32],
+    classes: &[Option<ConeClass>],
+    thresholds: &Thresholds,
+) -> Result<Vec<Candidate>, DetectError> {
+    if shape.len() != 3 || shape[0] != 1 || shape[2] != 6 {
+        return Err(DetectError::BadOutputShape {
+            shape: shape.to_vec(),
+            expected: "[1, N, 6] (x_min, y_min, x_max, y_max, score, class): the card or \
+                       metadata says end2end"
+                .to_owned(),
+        });
+    }
+    if data.len() != shape[1] * 6 {
+        return Err(DetectError::BadOutputShape {
+            shape: shape.to_vec(),
+            expected: format!("{} values, got {}", shape[1] * 6, data.len()),
+        });
+    }
+    if let Some(first) = data.iter().position(|v| !v.is_finite()) {
+        let count = data.iter().filter(|v| !v.is_finite()).count();
+        return Err(DetectError::NonFiniteOutput { count, first });
+    }
+    let mut candidates: Vec<Candidate> = data
+        .chunks_exact(6)
+        .filter(|row| row[4] >= thresholds.score_threshold && row[5] >= 0.0)
+        .filter_map(|row| {
+            let class = (*classes.get(row[5].round() as usize)?)?;
+            Some(Candidate {
+                class,
+                score: row[4],
+                bbox: [row[0], row[1], row[2], row[3]],
+            })
+        })
+        .collect();
+    candidates.sort_by(|a, b| b.score.total_cmp(&a.score));
+    candidates.truncate(thresholds.max_detections);
+    Ok(candidates)
 }
 
 /// Class-aware greedy NMS (see the module docs); returns the kept boxes, best first.

@@ -8,9 +8,9 @@ use conesight_onnx::{ModelOptions, OnnxModel};
 use image::{ImageBuffer, Rgb};
 
 use crate::card::{Layout, ModelCard};
-use crate::decode::decode;
+use crate::decode::{decode, decode_end2end};
 use crate::error::DetectError;
-use crate::preprocess::{InputMapping, band_input, letterbox_input};
+use crate::preprocess::{InputMapping, frame_input, letterbox_input};
 use crate::thresholds::Thresholds;
 
 /// Class names that are deliberately skipped (FSOCO's cones of unknown colour).
@@ -28,8 +28,8 @@ pub struct Detection {
     pub bbox_px: [f32; 4],
 }
 
-/// How to load a detector. Everything has a default: the card beside the model, its
-/// thresholds, ONNX Runtime found by `conesight-onnx`'s search.
+/// How to load a detector. Everything has a default: the card beside the model (or the model's
+/// own metadata), its thresholds, ONNX Runtime found by `conesight-onnx`'s search.
 #[derive(Debug, Clone, Default)]
 pub struct DetectorConfig {
     /// The card to use instead of reading one.
@@ -38,10 +38,6 @@ pub struct DetectorConfig {
     pub card_path: Option<PathBuf>,
     /// Thresholds overriding the card's (which override [`Thresholds::default`]).
     pub thresholds: Option<Thresholds>,
-    /// The band's first frame row, overriding the card's `band_top_px` (the level paper
-    /// camera's); set it from the calibration with
-    /// [`crate::horizon::band_top_from_horizon`]. Ignored by the Ultralytics layout.
-    pub band_top_px: Option<u32>,
     /// ONNX Runtime library and threads.
     pub onnx: ModelOptions,
 }
@@ -56,32 +52,31 @@ pub struct Detector {
 }
 
 impl Detector {
-    /// Loads the model at `path` and its card (see [`DetectorConfig`]).
+    /// Loads the model at `path` and its card (see [`DetectorConfig`] and [`crate::card`]).
     pub fn load(path: &Path, config: &DetectorConfig) -> Result<Self, DetectError> {
         let name = path.display().to_string();
+        let model = OnnxModel::load(path, &config.onnx)?;
         let card = match (&config.card, &config.card_path) {
             (Some(card), _) => card.clone(),
             (None, Some(card_path)) => ModelCard::read(card_path)?,
             (None, None) => {
-                let expected = ModelCard::path_for(path);
-                if !expected.is_file() {
-                    return Err(DetectError::CardMissing {
-                        model: path.to_path_buf(),
-                        expected,
-                    });
+                let beside = ModelCard::path_for(path);
+                if beside.is_file() {
+                    ModelCard::read(&beside)?
+                } else {
+                    ModelCard::from_metadata(&model.metadata(), &name)?.ok_or_else(|| {
+                        DetectError::CardMissing {
+                            model: path.to_path_buf(),
+                            expected: beside,
+                        }
+                    })?
                 }
-                ModelCard::read(&expected)?
             }
         };
-        let mut card = card;
-        if let (Some(top), Some(band)) = (config.band_top_px, card.band.as_mut()) {
-            band.band_top_px = top;
-        }
         card.validate(&name)?;
         let classes = class_mapping(&card.class_names, &name)?;
         let thresholds = config.thresholds.or(card.thresholds).unwrap_or_default();
         thresholds.validate()?;
-        let model = OnnxModel::load(path, &config.onnx)?;
         tracing::debug!(model = %name, layout = ?card.layout, ?thresholds, "detector loaded");
         Ok(Self {
             model,
@@ -94,14 +89,6 @@ impl Detector {
     /// The card in use.
     pub fn card(&self) -> &ModelCard {
         &self.card
-    }
-
-    /// Moves the band (conesight layout) to start at frame row `top_px`, e.g. after a new
-    /// calibration; the Ultralytics layout ignores it.
-    pub fn set_band_top_px(&mut self, top_px: u32) {
-        if let Some(band) = self.card.band.as_mut() {
-            band.band_top_px = top_px;
-        }
     }
 
     /// The thresholds in use.
@@ -120,7 +107,11 @@ impl Detector {
             shape: Vec::new(),
             expected: "one output tensor".to_owned(),
         })?;
-        let candidates = decode(&output.shape, &output.data, &self.classes, &self.thresholds)?;
+        let candidates = if self.card.end2end {
+            decode_end2end(&output.shape, &output.data, &self.classes, &self.thresholds)?
+        } else {
+            decode(&output.shape, &output.data, &self.classes, &self.thresholds)?
+        };
         Ok(candidates
             .into_iter()
             .map(|c| to_detection(c.class, c.score, c.bbox, &mapping))
@@ -133,12 +124,15 @@ impl Detector {
         frame: &ImageBuffer<Rgb<u8>, C>,
     ) -> Result<(conesight_onnx::TensorF32, InputMapping), DetectError> {
         match self.card.layout {
-            Layout::ConesightBand => {
-                let band = self.card.band.ok_or_else(|| DetectError::CardInvalid {
-                    model: self.model.path().display().to_string(),
-                    problem: "layout conesight_band needs a `band` entry".to_owned(),
-                })?;
-                band_input(frame, &band)
+            Layout::ConesightFrame => {
+                let params = self
+                    .card
+                    .frame_input
+                    .ok_or_else(|| DetectError::CardInvalid {
+                        model: self.model.path().display().to_string(),
+                        problem: "layout conesight_frame needs a `frame_input` entry".to_owned(),
+                    })?;
+                frame_input(frame, &params)
             }
             Layout::Ultralytics => {
                 let [_, _, h, w] = self.card.input.shape;
@@ -219,10 +213,10 @@ mod tests {
         let mapping = InputMapping {
             pad_x: 0.0,
             pad_y: 0.0,
-            scale: 2.0,
-            offset_y: 560.0,
+            scale_x: 2.0,
+            scale_y: 2.0,
         };
         let d = to_detection(ConeClass::Blue, 0.9, [5.0, 10.0, 11.0, 26.5], &mapping);
-        assert_eq!(d.bbox_px, [9.5, 579.5, 21.5, 612.5]);
+        assert_eq!(d.bbox_px, [9.5, 19.5, 21.5, 52.5]);
     }
 }

@@ -8,11 +8,14 @@ pub enum DetectError {
     /// ONNX Runtime or the model failed (see the inner error's message for the fix).
     #[error(transparent)]
     Onnx(#[from] conesight_onnx::OnnxError),
-    /// No model card was given and none sits beside the model.
+    /// No model card was given, none sits beside the model, and the model's metadata does
+    /// not describe it.
     #[error(
-        "no model card for {model}: expected {expected} (written by \
-         `python -m conesight_train.detector.onnx_export`), or pass `DetectorConfig::card` \
-         (for an Ultralytics export: `ModelCard::ultralytics(width, height, class_names)`)"
+        "{model} carries no detector metadata (`names`, `imgsz`) and has no card beside it \
+         ({expected}). For an Ultralytics model, export it again with `yolo export \
+         model=best.pt format=onnx` (Ultralytics writes the metadata); for conesight's own, \
+         `python -m conesight_train.detector.onnx_export`; otherwise write the card by hand \
+         (see crates/conesight-detect/README.md, \"Your own YOLO model\")"
     )]
     CardMissing {
         /// The model file.
@@ -78,14 +81,11 @@ pub enum DetectError {
         /// Index of the first one.
         first: usize,
     },
-    /// The calibrated camera does not look forward, so the horizon is not in the image.
-    #[error(
-        "the camera's forward direction has z = {forward_z:.3} in the camera frame, so the \
-         horizon is not in the image; check the extrinsics or set DetectorConfig::band_top_px"
-    )]
-    NoHorizon {
-        /// z of the vehicle's forward axis in the camera frame (must be positive).
-        forward_z: f64,
+    /// The ego mask could not be read.
+    #[error("ego mask: {problem}")]
+    BadEgoMask {
+        /// What is wrong and how to fix it.
+        problem: String,
     },
     /// A threshold is outside its range.
     #[error("threshold `{name}` = {value} is outside {range}")]

@@ -4,9 +4,13 @@
 //! Ultralytics convention); [`InputMapping`] takes them to continuous frame pixels, and
 //! [`crate::Detection::bbox_px`] subtracts 0.5 to give OpenCV edges (pixel `i` centred at `i`).
 //!
-//! - Band ([`band_input`], conesight's detector; `training/conesight_train/detector/band.py`
-//!   is the same rule): rows `[top, top + factor * H)`, each input pixel the `f32` mean of a
-//!   `factor x factor` block, RGB raw 0..255, NCHW. `frame = input * factor (+ top for y)`.
+//! - Whole frame ([`frame_input`], conesight's detector; `training/conesight_train/detector/
+//!   frame_input.py` is the same rule): scale `s = min(W / w, H / h)`, the frame resized to
+//!   `round(w s) x round(h s)` by area mean (bilinear when enlarging; [`crate::resize`]),
+//!   rounded to integers, placed at the top-left corner, the rest grey 114; RGB raw 0..255,
+//!   NCHW. `frame = input / (sx, sy)` with the per-axis scales of the rounded size. A
+//!   1920x1200 frame into 960x608 is the exact 2x2 block mean. Nothing depends on the
+//!   calibration: the detector sees the whole frame at any camera pitch.
 //! - Letterbox ([`letterbox_input`], Ultralytics): scale `r = min(H / h, W / w)`, resize to
 //!   `round(w r) x round(h r)` (bilinear, half-pixel centres), paste at `(round(dw - 0.1),
 //!   round(dh - 0.1))` with `dw, dh` half the padding, pad grey 114, RGB / 255, NCHW.
@@ -17,101 +21,82 @@ use std::ops::Deref;
 use conesight_onnx::TensorF32;
 use image::{ImageBuffer, Rgb};
 
-use crate::card::BandParams;
+use crate::card::FrameInputParams;
 use crate::error::DetectError;
+use crate::resize::resize_rgb;
 
-/// Ultralytics' letterbox padding value (0..255).
+/// Ultralytics' letterbox padding value (0..255), also conesight's fill.
 pub const LETTERBOX_FILL: f32 = 114.0;
 
-/// Continuous input pixels -> continuous frame pixels: `frame = (input - pad) * scale + offset`.
+/// Continuous input pixels -> continuous frame pixels: `frame = (input - pad) * scale`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct InputMapping {
     /// Input x of the frame's left edge.
     pub pad_x: f32,
-    /// Input y of the frame's (or band's) top edge.
+    /// Input y of the frame's top edge.
     pub pad_y: f32,
-    /// Frame pixels per input pixel.
-    pub scale: f32,
-    /// Frame row of the band's top edge (0 for letterbox).
-    pub offset_y: f32,
+    /// Frame pixels per input pixel along x.
+    pub scale_x: f32,
+    /// Frame pixels per input pixel along y.
+    pub scale_y: f32,
 }
 
 impl InputMapping {
     /// Maps a box `[x_min, y_min, x_max, y_max]` from input to frame pixels.
     pub fn frame_from_input(&self, b: [f32; 4]) -> [f32; 4] {
         [
-            (b[0] - self.pad_x) * self.scale,
-            (b[1] - self.pad_y) * self.scale + self.offset_y,
-            (b[2] - self.pad_x) * self.scale,
-            (b[3] - self.pad_y) * self.scale + self.offset_y,
+            (b[0] - self.pad_x) * self.scale_x,
+            (b[1] - self.pad_y) * self.scale_y,
+            (b[2] - self.pad_x) * self.scale_x,
+            (b[3] - self.pad_y) * self.scale_y,
         ]
     }
 }
 
-/// The band input of `frame` (see the module docs); errors when the frame does not fit.
-pub fn band_input<C: Deref<Target = [u8]>>(
+/// The size a `width x height` frame takes inside the input (module docs).
+pub fn resized_size(width: u32, height: u32, params: &FrameInputParams) -> (usize, usize) {
+    let (iw, ih) = (params.input_width_px as f64, params.input_height_px as f64);
+    let s = (iw / f64::from(width)).min(ih / f64::from(height));
+    (
+        ((f64::from(width) * s).round() as usize).clamp(1, params.input_width_px as usize),
+        ((f64::from(height) * s).round() as usize).clamp(1, params.input_height_px as usize),
+    )
+}
+
+/// The whole-frame input of `frame` (see the module docs).
+pub fn frame_input<C: Deref<Target = [u8]>>(
     frame: &ImageBuffer<Rgb<u8>, C>,
-    band: &BandParams,
+    params: &FrameInputParams,
 ) -> Result<(TensorF32, InputMapping), DetectError> {
     let (width, height) = frame.dimensions();
-    let bad = |problem: String| DetectError::BadImage {
-        width_px: width,
-        height_px: height,
-        problem,
-    };
-    if width != band.frame_width_px() {
-        return Err(bad(format!(
-            "the model needs frames {} px wide (input width {} x factor {}); resize the frame \
-             or export the detector for this width",
-            band.frame_width_px(),
-            band.input_width_px,
-            band.factor
-        )));
+    if width == 0 || height == 0 {
+        return Err(DetectError::BadImage {
+            width_px: width,
+            height_px: height,
+            problem: "the frame is empty".to_owned(),
+        });
     }
-    let top = band.top_for(height).ok_or_else(|| {
-        bad(format!(
-            "the band needs at least {} rows (input height {} x factor {})",
-            band.band_height_px(),
-            band.input_height_px,
-            band.factor
-        ))
-    })?;
-    let (w_in, h_in, k) = (
-        band.input_width_px as usize,
-        band.input_height_px as usize,
-        band.factor as usize,
+    let (rw, rh) = resized_size(width, height, params);
+    let resized = resize_rgb(frame.as_raw(), width as usize, height as usize, rw, rh);
+    let (w_in, h_in) = (
+        params.input_width_px as usize,
+        params.input_height_px as usize,
     );
     let plane = w_in * h_in;
-    let mut data = vec![0.0f32; 3 * plane];
-    let raw = frame.as_raw();
-    let stride = width as usize * 3;
-    let inv = 1.0 / (k * k) as f32;
-    let mut sums = vec![0u32; 3 * w_in];
-    for y in 0..h_in {
-        sums.iter_mut().for_each(|s| *s = 0);
-        for dy in 0..k {
-            let row = (top as usize + y * k + dy) * stride;
-            let pixels = &raw[row..row + stride];
-            for (x, sum) in sums.chunks_exact_mut(3).enumerate() {
-                let block = &pixels[x * k * 3..(x + 1) * k * 3];
-                for px in block.chunks_exact(3) {
-                    sum[0] += u32::from(px[0]);
-                    sum[1] += u32::from(px[1]);
-                    sum[2] += u32::from(px[2]);
-                }
-            }
-        }
-        for (x, sum) in sums.chunks_exact(3).enumerate() {
-            for c in 0..3 {
-                data[c * plane + y * w_in + x] = sum[c] as f32 * inv;
-            }
+    let mut data = vec![LETTERBOX_FILL; 3 * plane];
+    for y in 0..rh {
+        let row = &resized[y * rw * 3..(y + 1) * rw * 3];
+        for (x, px) in row.chunks_exact(3).enumerate() {
+            data[y * w_in + x] = px[0];
+            data[plane + y * w_in + x] = px[1];
+            data[2 * plane + y * w_in + x] = px[2];
         }
     }
     let mapping = InputMapping {
         pad_x: 0.0,
         pad_y: 0.0,
-        scale: band.factor as f32,
-        offset_y: top as f32,
+        scale_x: width as f32 / rw as f32,
+        scale_y: height as f32 / rh as f32,
     };
     Ok((
         TensorF32 {
@@ -171,8 +156,8 @@ pub fn letterbox_input<C: Deref<Target = [u8]>>(
     let mapping = InputMapping {
         pad_x: left as f32,
         pad_y: top as f32,
-        scale: (1.0 / r) as f32,
-        offset_y: 0.0,
+        scale_x: (1.0 / r) as f32,
+        scale_y: (1.0 / r) as f32,
     };
     Ok((
         TensorF32 {
@@ -199,38 +184,51 @@ mod tests {
     }
 
     #[test]
-    fn band_is_the_block_mean_of_the_clamped_rows() {
-        let band = BandParams {
-            band_top_px: 40,
-            input_width_px: 8,
-            input_height_px: 4,
-            factor: 2,
+    fn a_1920x1200_frame_is_the_2x2_block_mean_with_fill_below() {
+        let params = FrameInputParams {
+            input_width_px: 16,
+            input_height_px: 12,
         };
-        let frame = gradient(16, 10);
-        let (tensor, mapping) = band_input(&frame, &band).unwrap();
-        assert_eq!(tensor.shape, vec![1, 3, 4, 8]);
-        // 40 overruns a 10-row frame: the band is the last 8 rows (top 2).
-        assert_eq!(mapping.offset_y, 2.0);
+        let frame = gradient(32, 20);
+        let (tensor, mapping) = frame_input(&frame, &params).unwrap();
+        assert_eq!(tensor.shape, vec![1, 3, 12, 16]);
         let px = |x: u32, y: u32, c: usize| f32::from(frame.get_pixel(x, y)[c]);
-        let (x, y) = (3usize, 1usize);
+        let (x, y) = (5usize, 3usize);
         for c in 0..3 {
-            let (fx, fy) = (2 * x as u32, 2 + 2 * y as u32);
-            let want =
+            let (fx, fy) = (2 * x as u32, 2 * y as u32);
+            let mean =
                 (px(fx, fy, c) + px(fx + 1, fy, c) + px(fx, fy + 1, c) + px(fx + 1, fy + 1, c))
                     / 4.0;
-            assert_eq!(tensor.data[c * 32 + y * 8 + x], want);
+            assert_eq!(tensor.data[c * 192 + y * 16 + x], (mean + 0.5).floor());
         }
-        let b = mapping.frame_from_input([1.0, 0.5, 2.0, 4.0]);
-        assert_eq!(b, [2.0, 3.0, 4.0, 10.0]);
+        // Rows 10 and 11 are below the 32x20 frame's 16x10 image: grey.
+        assert_eq!(tensor.data[11 * 16 + 3], LETTERBOX_FILL);
+        assert_eq!(mapping.scale_x, 2.0);
+        assert_eq!(mapping.scale_y, 2.0);
+        assert_eq!(
+            mapping.frame_from_input([1.0, 0.5, 2.0, 4.0]),
+            [2.0, 1.0, 4.0, 8.0]
+        );
     }
 
     #[test]
-    fn band_rejects_frames_that_do_not_fit() {
-        let band = BandParams::default();
-        let err = band_input(&gradient(1280, 720), &band).unwrap_err();
-        assert!(err.to_string().contains("1920 px wide"), "{err}");
-        let err = band_input(&gradient(1920, 600), &band).unwrap_err();
-        assert!(err.to_string().contains("at least 768 rows"), "{err}");
+    fn any_frame_size_fits_and_maps_back() {
+        let params = FrameInputParams::default();
+        for (w, h) in [
+            (1280, 720),
+            (1280, 1038),
+            (640, 480),
+            (1920, 1080),
+            (300, 2000),
+        ] {
+            let (tensor, mapping) = frame_input(&gradient(w, h), &params).unwrap();
+            assert_eq!(tensor.shape, vec![1, 3, 608, 960]);
+            let (rw, rh) = resized_size(w, h, &params);
+            let b = mapping.frame_from_input([0.0, 0.0, rw as f32, rh as f32]);
+            assert!((b[2] - w as f32).abs() < 1e-3 && (b[3] - h as f32).abs() < 1e-3);
+        }
+        let err = frame_input(&RgbImage::new(0, 5), &params).unwrap_err();
+        assert!(err.to_string().contains("empty"), "{err}");
     }
 
     #[test]

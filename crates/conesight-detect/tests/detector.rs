@@ -1,6 +1,7 @@
-//! End to end through the real ONNX Runtime: conesight's band layout against the Python
-//! pipeline's detections, the Ultralytics adapter on a constant-output model, and bad inputs.
-//! Fixtures: tests/data/make_fixtures.py.
+//! End to end through the real ONNX Runtime: conesight's whole-frame layout (no card: the
+//! model's metadata) against the Python pipeline's detections, the Ultralytics adapter on
+//! constant-output models (both output layouts, with a card and with Ultralytics' metadata
+//! alone), and bad inputs. Fixtures: tests/data/make_fixtures.py.
 
 use std::path::{Path, PathBuf};
 
@@ -32,13 +33,20 @@ fn ultralytics_config() -> DetectorConfig {
 }
 
 #[test]
-fn band_layout_matches_the_python_pipeline() {
-    let mut detector = Detector::load(&data("tiny_band.onnx"), &DetectorConfig::default())
-        .expect("model and card load");
+fn frame_layout_matches_the_python_pipeline_without_a_card() {
+    let model = data("tiny_frame.onnx");
+    assert!(!conesight_detect::ModelCard::path_for(&model).exists());
+    let mut detector =
+        Detector::load(&model, &DetectorConfig::default()).expect("model and metadata load");
+    assert_eq!(
+        detector.card().layout,
+        conesight_detect::Layout::ConesightFrame
+    );
+    assert_eq!(detector.thresholds().score_threshold, 0.5);
     let expected: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(data("tiny_band.expected.json")).unwrap())
+        serde_json::from_str(&std::fs::read_to_string(data("tiny_frame.expected.json")).unwrap())
             .unwrap();
-    let frame = image::open(data("tiny_band_frame.png")).unwrap().to_rgb8();
+    let frame = image::open(data("tiny_frame.png")).unwrap().to_rgb8();
     let dets = detector.detect(&frame).expect("detects");
     let want = expected["detections"].as_array().unwrap();
     assert!(
@@ -49,10 +57,10 @@ fn band_layout_matches_the_python_pipeline() {
     for (got, want) in dets.iter().zip(want) {
         let class = ConeClass::ALL[want["class_id"].as_u64().unwrap() as usize];
         assert_eq!(got.class, class);
-        assert!((got.score - want["score"].as_f64().unwrap() as f32).abs() < 1e-5);
+        assert!((got.score - want["score"].as_f64().unwrap() as f32).abs() < 1e-4);
         for (g, w) in got.bbox_px.iter().zip(want["bbox_px"].as_array().unwrap()) {
             assert!(
-                (g - w.as_f64().unwrap() as f32).abs() < 1e-3,
+                (g - w.as_f64().unwrap() as f32).abs() < 2e-2,
                 "{got:?} vs {want}"
             );
         }
@@ -91,10 +99,13 @@ fn ultralytics_adapter_letterboxes_maps_classes_and_suppresses() {
 #[test]
 fn bad_models_cards_and_frames_are_clear_errors() {
     let err = Detector::load(&data("ultralytics_const.onnx"), &DetectorConfig::default())
-        .expect_err("no card beside it");
+        .expect_err("no card beside it, no metadata in it");
     assert!(matches!(err, DetectError::CardMissing { .. }), "{err}");
+    let text = err.to_string();
+    assert!(text.contains("ultralytics_const.card.json"), "{err}");
+    // The fix, said as commands, not as Rust API.
     assert!(
-        err.to_string().contains("ultralytics_const.card.json"),
+        text.contains("yolo export model=best.pt format=onnx"),
         "{err}"
     );
 
@@ -111,13 +122,13 @@ fn bad_models_cards_and_frames_are_clear_errors() {
     let err = transposed.detect(&frame).expect_err("wrong layout");
     assert!(err.to_string().contains("transposed"), "{err}");
 
-    let mut band = Detector::load(&data("tiny_band.onnx"), &DetectorConfig::default()).unwrap();
-    let err = band
-        .detect(&RgbImage::new(100, 80))
-        .expect_err("wrong width");
-    assert!(err.to_string().contains("128 px wide"), "{err}");
-    let err = band.detect(&RgbImage::new(128, 40)).expect_err("too short");
-    assert!(err.to_string().contains("at least 64 rows"), "{err}");
+    let mut ours = Detector::load(&data("tiny_frame.onnx"), &DetectorConfig::default()).unwrap();
+    let err = ours.detect(&RgbImage::new(0, 40)).expect_err("empty");
+    assert!(err.to_string().contains("empty"), "{err}");
+    // Any other size is fine: the whole frame is resized into the input.
+    for (w, h) in [(100, 80), (128, 40), (33, 250)] {
+        ours.detect(&RgbImage::new(w, h)).expect("any frame size");
+    }
 
     let mut card = ultralytics_config().card.unwrap();
     card.class_names[0] = "traffic_light".to_owned();
@@ -140,16 +151,22 @@ fn bad_models_cards_and_frames_are_clear_errors() {
 }
 
 #[test]
-fn band_top_follows_the_config_and_the_setter() {
-    let config = DetectorConfig {
-        band_top_px: Some(3),
-        ..DetectorConfig::default()
-    };
-    let mut detector = Detector::load(&data("tiny_band.onnx"), &config).unwrap();
-    let frame = image::open(data("tiny_band_frame.png")).unwrap().to_rgb8();
-    assert_eq!(detector.preprocess(&frame).unwrap().1.offset_y, 3.0);
-    detector.set_band_top_px(500); // clamped: the band's last row is the frame's
-    assert_eq!(detector.preprocess(&frame).unwrap().1.offset_y, 16.0);
-    let dets = detector.detect(&frame).unwrap();
-    assert!(dets.iter().all(|d| d.bbox_px[1] < d.bbox_px[3]));
+fn an_nms_in_graph_export_runs_from_its_metadata_alone() {
+    let model = data("ultralytics_e2e.onnx");
+    let mut detector = Detector::load(&model, &DetectorConfig::default()).expect("metadata");
+    assert!(detector.card().end2end);
+    assert_eq!(detector.card().input.shape, [1, 3, 64, 64]);
+    // 128x64 frame -> scale 0.5 into 64x32, pasted 16 rows down in the 64x64 input.
+    let frame = RgbImage::from_pixel(128, 64, image::Rgb([90, 120, 60]));
+    let dets = detector.detect(&frame).expect("detects");
+    let summary: Vec<(ConeClass, f32, [f32; 4])> =
+        dets.iter().map(|d| (d.class, d.score, d.bbox_px)).collect();
+    assert_eq!(
+        summary,
+        vec![
+            (ConeClass::Blue, 0.9, [55.5, 15.5, 71.5, 47.5]),
+            (ConeClass::Yellow, 0.7, [15.5, 17.5, 23.5, 37.5]),
+            (ConeClass::LargeOrange, 0.6, [93.5, 11.5, 105.5, 35.5]),
+        ]
+    );
 }

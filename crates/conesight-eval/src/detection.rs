@@ -1,12 +1,10 @@
 //! The detector as evaluated: one instance decoding down to [`AP_SCORE_FLOOR`] (so AP sees
 //! the whole precision-recall curve, as `training/conesight_train/detector/evaluate.py`
-//! does), whose detections at the card's operating threshold feed the pipeline. The band
-//! follows each frame's horizon, as `conesight_pipeline::DetectorStage` places it.
+//! does), whose detections at the card's operating threshold feed the pipeline. The detector
+//! sees the whole frame, as `conesight_pipeline::DetectorStage` runs it.
 
 use std::path::Path;
 
-use conesight_core::{Camera, Extrinsics};
-use conesight_detect::horizon::{band_top_from_horizon, horizon_row_px};
 use conesight_detect::{Detection, Detector, DetectorConfig, ModelCard, Thresholds};
 use conesight_onnx::ModelOptions;
 use conesight_proto::ConeDetection;
@@ -48,19 +46,8 @@ impl EvalDetector {
         self.operating.score_threshold
     }
 
-    /// Every detection down to the floor, band placed from the calibration's horizon.
-    pub fn detect(
-        &mut self,
-        frame: &RgbImage,
-        camera: &Camera,
-        extrinsics: &Extrinsics,
-    ) -> anyhow::Result<Vec<Detection>> {
-        if self.detector.card().band.is_some()
-            && let Ok(horizon) = horizon_row_px(camera, extrinsics)
-        {
-            self.detector
-                .set_band_top_px(band_top_from_horizon(horizon));
-        }
+    /// Every detection down to the floor.
+    pub fn detect(&mut self, frame: &RgbImage) -> anyhow::Result<Vec<Detection>> {
         Ok(self.detector.detect(frame)?)
     }
 

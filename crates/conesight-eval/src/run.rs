@@ -411,7 +411,7 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Meta> {
         // 3. The detector and the whole pipeline.
         if let Some(detector) = detector.as_mut() {
             let start = Instant::now();
-            let all = detector.detect(image, &camera, &extrinsics)?;
+            let all = detector.detect(image)?;
             let detect_ms = start.elapsed().as_secs_f64() * 1e3;
             detections_out.write(&DetectionFrameRecord {
                 seed,

@@ -106,6 +106,20 @@ impl OnnxModel {
             .collect()
     }
 
+    /// The model's custom metadata (`metadata_props`: key, value), sorted by key; empty when
+    /// the model has none or ONNX Runtime cannot read it. Ultralytics exports write `names`,
+    /// `imgsz`, `stride`, `task` and `end2end` there; conesight's detector writes its layout.
+    pub fn metadata(&self) -> Vec<(String, String)> {
+        let Ok(metadata) = self.session.metadata() else {
+            return Vec::new();
+        };
+        let mut keys = metadata.custom_keys().unwrap_or_default();
+        keys.sort();
+        keys.into_iter()
+            .filter_map(|k| metadata.custom(&k).map(|v| (k, v)))
+            .collect()
+    }
+
     /// The file the model was loaded from.
     pub fn path(&self) -> &Path {
         &self.path

@@ -1,36 +1,51 @@
 //! [`DetectorStage`]: a frame of any size -> [`ConeDetection`]s.
 //!
-//! conesight's detector reads a horizon band of a 1920-wide frame. Frames of another width are
-//! resized to the band's width first (and padded at the bottom when too short), and the boxes
-//! are mapped back, so any image size works; the band's first row follows the calibration's
-//! horizon when one is set ([`DetectorStage::set_calibration`]).
+//! The detector sees the whole frame (conesight's layout resizes any frame into its input;
+//! Ultralytics models letterbox it), so nothing here depends on the calibration: a camera
+//! pitched down, mounted high or bouncing keeps its cones in view. What the stage can still be
+//! told is where the car itself shows: an [`EgoMask`], whose detections are dropped and
+//! counted ([`DetectorStage::coverage`] says what the detector covers).
 
 use std::ops::Deref;
 use std::path::Path;
 
-use conesight_core::{Camera, Extrinsics};
-use conesight_detect::horizon::{band_top_from_horizon, horizon_row_px};
-use conesight_detect::{Detector, DetectorConfig};
+use conesight_detect::{Detector, DetectorConfig, EgoMask};
 use conesight_onnx::ModelOptions;
 use conesight_proto::ConeDetection;
 use conesight_vision::{PixelBox, RgbBuffer};
-use image::{Rgb, RgbImage, imageops};
 
 use crate::error::PipelineError;
 
-/// Grey used to pad frames shorter than the band (the detector's training fill).
-const PAD_GREY: u8 = 114;
+/// What the detector looks at, for logs, metrics and `/readyz`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Coverage {
+    /// The last frame's size.
+    pub frame_px: (u32, u32),
+    /// The share of the frame the detector covers (1 minus the ego mask's share).
+    pub fraction: f64,
+    /// A sentence saying so.
+    pub summary: String,
+}
+
+/// What the stage made of one frame.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct DetectorOutput {
+    /// The detections kept.
+    pub detections: Vec<ConeDetection>,
+    /// Detections dropped because they stood in the ego mask.
+    pub masked: usize,
+}
 
 /// The detector stage.
 #[derive(Debug)]
 pub struct DetectorStage {
     detector: Detector,
-    /// Horizon row of the calibrated camera in frame pixels, when known.
-    horizon_row_px: Option<f64>,
+    ego_mask: Option<EgoMask>,
+    coverage: Option<Coverage>,
 }
 
 impl DetectorStage {
-    /// Loads the detector at `path` (its card beside it).
+    /// Loads the detector at `path` (its card beside it, or its own metadata).
     pub fn load(path: &Path, onnx: &ModelOptions) -> Result<Self, PipelineError> {
         if !path.is_file() {
             return Err(PipelineError::DetectorMissing {
@@ -43,64 +58,76 @@ impl DetectorStage {
         };
         Ok(Self {
             detector: Detector::load(path, &config)?,
-            horizon_row_px: None,
+            ego_mask: None,
+            coverage: None,
         })
     }
 
-    /// Places the band from the camera's horizon (a camera looking up keeps the card's band).
-    pub fn set_calibration(&mut self, camera: &Camera, extrinsics: &Extrinsics) {
-        self.horizon_row_px = horizon_row_px(camera, extrinsics).ok();
+    /// Drops detections standing in `mask` from now on.
+    pub fn set_ego_mask(&mut self, mask: Option<EgoMask>) {
+        self.ego_mask = mask;
+        self.coverage = None;
     }
 
-    /// Detects the cones of `frame` (any size); boxes in `frame`'s pixels.
+    /// The detector in use.
+    pub fn detector(&self) -> &Detector {
+        &self.detector
+    }
+
+    /// What the detector covered on the last frame (None before the first).
+    pub fn coverage(&self) -> Option<&Coverage> {
+        self.coverage.as_ref()
+    }
+
+    /// Detects the cones of `frame` (any size); boxes in `frame`'s pixels. Returns the
+    /// coverage too when it changed (first frame, new size or mask), for the caller to log.
     pub fn detect<C: Deref<Target = [u8]>>(
         &mut self,
         frame: &RgbBuffer<C>,
-    ) -> Result<Vec<ConeDetection>, PipelineError> {
-        let Some(band) = self.detector.card().band else {
-            // Letterbox layouts take any size.
-            return Ok(self.detector.detect(frame)?.iter().map(to_core).collect());
-        };
-        let width_px = band.frame_width_px();
-        let scale = f64::from(width_px) / f64::from(frame.width().max(1));
-        if let Some(horizon) = self.horizon_row_px {
-            self.detector
-                .set_band_top_px(band_top_from_horizon(horizon * scale));
+    ) -> Result<DetectorOutput, PipelineError> {
+        let size = frame.dimensions();
+        if self.coverage.as_ref().is_none_or(|c| c.frame_px != size) {
+            self.coverage = Some(self.measure_coverage(size));
         }
-        if frame.width() == width_px && frame.height() >= band.band_height_px() {
-            return Ok(self.detector.detect(frame)?.iter().map(to_core).collect());
+        let mut output = DetectorOutput::default();
+        for detection in self.detector.detect(frame)? {
+            if self
+                .ego_mask
+                .as_ref()
+                .is_some_and(|m| m.covers_box(detection.bbox_px))
+            {
+                output.masked += 1;
+            } else {
+                output.detections.push(to_core(&detection));
+            }
         }
-        let height_px = ((f64::from(frame.height()) * scale).round() as u32).max(1);
-        let resized = if frame.width() == width_px {
-            RgbImage::from_fn(frame.width(), frame.height(), |x, y| *frame.get_pixel(x, y))
-        } else {
-            imageops::resize(frame, width_px, height_px, imageops::FilterType::Triangle)
+        Ok(output)
+    }
+
+    fn measure_coverage(&self, (width, height): (u32, u32)) -> Coverage {
+        let card = self.detector.card();
+        let [_, _, h, w] = card.input.shape;
+        let masked = self
+            .ego_mask
+            .as_ref()
+            .map_or(0.0, |m| m.covered_fraction(width, height));
+        let mask_text = match &self.ego_mask {
+            Some(m) => format!(
+                "; an ego mask of {} polygon(s) covers {:.1} % of it, where detections are dropped",
+                m.polygons().len(),
+                100.0 * masked
+            ),
+            None => String::new(),
         };
-        let input = if resized.height() < band.band_height_px() {
-            let mut padded = RgbImage::from_pixel(
-                width_px,
-                band.band_height_px(),
-                Rgb([PAD_GREY, PAD_GREY, PAD_GREY]),
-            );
-            imageops::replace(&mut padded, &resized, 0, 0);
-            padded
-        } else {
-            resized
-        };
-        let mut detections: Vec<ConeDetection> =
-            self.detector.detect(&input)?.iter().map(to_core).collect();
-        for detection in &mut detections {
-            let b = &mut detection.box_px;
-            // Edge coordinates: pixel centres scale about -0.5.
-            let back = |v: f64| (v + 0.5) / scale - 0.5;
-            *b = PixelBox {
-                x_min_px: back(b.x_min_px),
-                y_min_px: back(b.y_min_px),
-                x_max_px: back(b.x_max_px),
-                y_max_px: back(b.y_max_px),
-            };
+        Coverage {
+            frame_px: (width, height),
+            fraction: 1.0 - masked,
+            summary: format!(
+                "the detector covers the whole {width}x{height} frame (resized into its {w}x{h} \
+                 input, {:?} layout){mask_text}",
+                card.layout
+            ),
         }
-        Ok(detections)
     }
 }
 

@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use conesight_core::{Camera, Extrinsics};
+use conesight_detect::EgoMask;
 use conesight_onnx::ModelOptions;
 use conesight_proto::{ConeDetection, ConeKeypoints, LocatedCone};
 use image::RgbImage;
@@ -28,6 +29,8 @@ pub struct PipelineConfig {
     pub onnx: ModelOptions,
     /// Constrain cone bases to the road plane of the extrinsics.
     pub on_ground_plane: bool,
+    /// Where the car itself shows: detections standing there are dropped.
+    pub ego_mask: Option<EgoMask>,
 }
 
 /// Wall time of each stage for one frame.
@@ -88,7 +91,7 @@ impl InProcessPipeline {
         } else {
             let path = locate_detector(config.detector.as_deref());
             let mut stage = DetectorStage::load(&path, &config.onnx)?;
-            stage.set_calibration(camera, extrinsics);
+            stage.set_ego_mask(config.ego_mask.clone());
             Some(stage)
         };
         let keypoint_model = locate_keypoint_model(config.keypoint_model.as_deref());
@@ -110,6 +113,11 @@ impl InProcessPipeline {
         &mut self.keypoints
     }
 
+    /// The mounting in use.
+    pub fn extrinsics(&self) -> &Extrinsics {
+        self.localiser.extrinsics()
+    }
+
     /// Switches to another calibration (no-op when unchanged).
     pub fn set_calibration(
         &mut self,
@@ -120,9 +128,6 @@ impl InProcessPipeline {
             return Ok(());
         }
         self.localiser = LocaliserStage::new(camera, extrinsics, self.on_ground_plane)?;
-        if let Some(detector) = self.detector.as_mut() {
-            detector.set_calibration(camera, extrinsics);
-        }
         Ok(())
     }
 
@@ -145,7 +150,7 @@ impl InProcessPipeline {
         let start = Instant::now();
         let detections = match (boxes, self.detector.as_mut()) {
             (Some(boxes), _) => boxes.to_vec(),
-            (None, Some(detector)) => detector.detect(frame)?,
+            (None, Some(detector)) => detector.detect(frame)?.detections,
             (None, None) => {
                 return Err(PipelineError::DetectorMissing {
                     path: locate_detector(None),

@@ -36,7 +36,7 @@ pub mod source;
 pub mod stats;
 pub mod truth;
 
-pub use detector_stage::DetectorStage;
+pub use detector_stage::{Coverage, DetectorOutput, DetectorStage};
 pub use error::PipelineError;
 pub use in_process::{FrameResult, InProcessPipeline, PipelineConfig, StageTimings};
 pub use keypoint_stage::{KeypointOutput, KeypointStage};

@@ -1,5 +1,6 @@
 //! [`Readiness`]: what `/readyz` reports, set by the service as it starts and runs.
 
+use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
@@ -16,10 +17,11 @@ pub struct Readiness {
     /// Nanoseconds after `started` of the last input, plus one (0 = no input yet).
     last_input_ns: AtomicU64,
     max_input_age: Option<Duration>,
+    details: Mutex<Vec<(String, String)>>,
 }
 
 /// One readiness check's answer.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct ReadinessReport {
     /// The model (or whatever the service needs loaded) is loaded.
     pub model_loaded: bool,
@@ -29,6 +31,8 @@ pub struct ReadinessReport {
     pub input_age_secs: Option<f64>,
     /// The last input is recent enough (always true for services without inputs).
     pub inputs_fresh: bool,
+    /// What the service says about itself (e.g. the detector's coverage), one line each.
+    pub details: Vec<(String, String)>,
 }
 
 impl ReadinessReport {
@@ -42,7 +46,7 @@ impl ReadinessReport {
         let age = self
             .input_age_secs
             .map_or_else(|| "none".to_owned(), |secs| format!("{secs:.3}"));
-        format!(
+        let mut text = format!(
             "{}\nmodel_loaded {}\nsession_up {}\ninputs_fresh {}\ninput_age_secs {age}\n",
             if self.is_ready() {
                 "ready"
@@ -52,7 +56,11 @@ impl ReadinessReport {
             self.model_loaded,
             self.session_up,
             self.inputs_fresh,
-        )
+        );
+        for (key, value) in &self.details {
+            text.push_str(&format!("{key} {}\n", value.replace('\n', " ")));
+        }
+        text
     }
 }
 
@@ -66,6 +74,19 @@ impl Readiness {
             session_up: AtomicBool::new(false),
             last_input_ns: AtomicU64::new(0),
             max_input_age,
+            details: Mutex::new(Vec::new()),
+        }
+    }
+
+    /// Sets (or replaces) a detail line `key value` of the report.
+    pub fn set_detail(&self, key: &str, value: String) {
+        let mut details = self
+            .details
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        match details.iter_mut().find(|(k, _)| k == key) {
+            Some(entry) => entry.1 = value,
+            None => details.push((key.to_owned(), value)),
         }
     }
 
@@ -104,6 +125,11 @@ impl Readiness {
             session_up: self.session_up.load(Ordering::Relaxed),
             input_age_secs: input_age.map(|age| age.as_secs_f64()),
             inputs_fresh,
+            details: self
+                .details
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+                .clone(),
         }
     }
 }

@@ -10,12 +10,16 @@
 //! | `conesight_errors_total` | counter | `kind` |
 //! | `conesight_stage_latency_seconds` | histogram | `stage` |
 //! | `conesight_queue_depth` | gauge | |
+//! | `conesight_detections_masked_total` | counter | (detector) detections dropped in the ego mask |
+//! | `conesight_detector_coverage_ratio` | gauge | (detector) share of the frame it covers |
 
 use std::time::Duration;
 
 use prometheus_client::encoding::text::encode;
 use prometheus_client::metrics::counter::Counter;
 use prometheus_client::metrics::family::Family;
+use std::sync::atomic::AtomicU64;
+
 use prometheus_client::metrics::gauge::Gauge;
 use prometheus_client::metrics::histogram::{Histogram, exponential_buckets};
 use prometheus_client::registry::Registry;
@@ -52,6 +56,8 @@ pub struct Metrics {
     errors: Family<OneLabel, Counter>,
     stage_latency: Family<OneLabel, Histogram, fn() -> Histogram>,
     queue_depth: Gauge,
+    detections_masked: Counter,
+    detector_coverage: Gauge<f64, AtomicU64>,
 }
 
 impl Default for Metrics {
@@ -74,6 +80,18 @@ impl Metrics {
             latency_histogram,
         );
         let queue_depth = Gauge::default();
+        let detections_masked = Counter::default();
+        let detector_coverage = Gauge::<f64, AtomicU64>::default();
+        registry.register(
+            "detections_masked",
+            "Detections dropped because they stood in the ego mask (detector)",
+            detections_masked.clone(),
+        );
+        registry.register(
+            "detector_coverage_ratio",
+            "Share of the frame the detector covers: 1 minus the ego mask's share (detector)",
+            detector_coverage.clone(),
+        );
         registry.register(
             "frames_received",
             "Input messages received from the bus",
@@ -120,7 +138,19 @@ impl Metrics {
             errors,
             stage_latency,
             queue_depth,
+            detections_masked,
+            detector_coverage,
         }
+    }
+
+    /// Counts detections dropped in the ego mask.
+    pub fn detections_masked(&self, count: u64) {
+        self.detections_masked.inc_by(count);
+    }
+
+    /// Sets the share of the frame the detector covers.
+    pub fn set_detector_coverage(&self, ratio: f64) {
+        self.detector_coverage.set(ratio);
     }
 
     /// Counts one input received.

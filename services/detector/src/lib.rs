@@ -3,21 +3,23 @@
 //! Frames in (`.../<camera>/frame`, newest wins), detections out (`.../<camera>/detections`).
 //! Decoding and inference run on the worker thread `detector`, fed by a slot of 1 straight
 //! from Zenoh's receive thread (`Node::feed_worker`): while it works on a frame, a newer frame
-//! replaces any waiting one (counted as dropped). The band of
-//! the detector follows the horizon of the camera info (`.../<camera>/camera_info`).
+//! replaces any waiting one (counted as dropped). The detector sees the whole frame, so it
+//! needs no calibration; an ego mask (`--ego-mask`) drops detections on the car itself. What
+//! it covers is logged, reported on `/readyz` (`coverage ...`) and in
+//! `conesight_detector_coverage_ratio`; masked detections in
+//! `conesight_detections_masked_total`.
 //!
 //! Entry point: [`run`].
 
 use std::path::PathBuf;
-use std::sync::Arc;
 use std::time::Instant;
 
 use conesight_bus::zenoh::Wait;
 use conesight_bus::zenoh::sample::Sample;
 use conesight_bus::{Stream, declare_publisher, encode};
-use conesight_core::Extrinsics;
+use conesight_detect::EgoMask;
 use conesight_onnx::ModelOptions;
-use conesight_pipeline::node::{CalibrationCell, CommonArgs, follow_camera_info};
+use conesight_pipeline::node::CommonArgs;
 use conesight_pipeline::{DetectorStage, Node, Shutdown, locate_detector};
 use conesight_proto::{pb, require_header};
 use conesight_service::Worker;
@@ -39,6 +41,11 @@ pub struct DetectorArgs {
     /// default; `false` frees the cores for the other services between frames).
     #[arg(long = "onnx-spinning", env = "CONESIGHT_ONNX_SPINNING")]
     pub onnx_spinning: Option<bool>,
+    /// Where the car itself shows, in frame pixels: detections standing there are dropped.
+    /// Points `"x,y x,y x,y"` (polygons separated by `;`), or a YAML/JSON file with
+    /// `ego_mask_px: [[x, y], ...]` (e.g. the camera's calibration YAML with that key).
+    #[arg(long = "ego-mask", env = "CONESIGHT_EGO_MASK")]
+    pub ego_mask: Option<String>,
 }
 
 impl DetectorArgs {
@@ -49,6 +56,7 @@ impl DetectorArgs {
             model: None,
             onnx_threads: None,
             onnx_spinning: None,
+            ego_mask: None,
         }
     }
 }
@@ -62,15 +70,14 @@ pub async fn run(args: &DetectorArgs, node: Node, shutdown: Shutdown) -> anyhow:
         allow_spinning: args.onnx_spinning,
         ..ModelOptions::default()
     };
+    let ego_mask = args.ego_mask.as_deref().map(EgoMask::parse).transpose()?;
     let mut stage =
         tokio::task::spawn_blocking(move || DetectorStage::load(&path, &onnx)).await??;
-    let calibration = Arc::new(CalibrationCell::default());
-    follow_camera_info(&node, camera, calibration.clone(), &shutdown).await?;
+    stage.set_ego_mask(ego_mask);
     let publisher =
         declare_publisher(&node.session, &node.topics, camera, Stream::Detections).await?;
     let limit = args.common.max_message_bytes();
     let worker_node = node.clone();
-    let mut seen_calibration = 0_u64;
     let worker = Worker::spawn("detector", node.metrics.clone(), move |sample: Sample| {
         let node = &worker_node;
         let started = Instant::now();
@@ -94,15 +101,10 @@ pub async fn run(args: &DetectorArgs, node: Node, shutdown: Shutdown) -> anyhow:
             }
         };
         node.metrics.observe_stage("decode", started.elapsed());
-        if let Some((camera, extrinsics)) = calibration.newer(&mut seen_calibration) {
-            stage.set_calibration(
-                &camera,
-                &extrinsics.unwrap_or_else(Extrinsics::paper_default),
-            );
-        }
         let inference = Instant::now();
-        let detections = match stage.detect(&image) {
-            Ok(detections) => detections,
+        let covered = stage.coverage().map(|c| c.frame_px);
+        let output = match stage.detect(&image) {
+            Ok(output) => output,
             Err(error) => {
                 node.metrics.frame_dropped();
                 node.errors.report(error.kind(), &error);
@@ -110,6 +112,16 @@ pub async fn run(args: &DetectorArgs, node: Node, shutdown: Shutdown) -> anyhow:
             }
         };
         node.metrics.observe_stage("inference", inference.elapsed());
+        if let Some(coverage) = stage.coverage()
+            && covered != Some(coverage.frame_px)
+        {
+            tracing::info!("{}", coverage.summary);
+            node.metrics.set_detector_coverage(coverage.fraction);
+            node.readiness
+                .set_detail("coverage", coverage.summary.clone());
+        }
+        node.metrics.detections_masked(output.masked as u64);
+        let detections = output.detections;
         let mut header = header;
         header.stamp_publish();
         let message = pb::Detections::new(header, &detections);
