@@ -7,7 +7,7 @@ ROOT := $(CURDIR)
 PY := $(ROOT)/build/venv/bin/python
 export ORT_DYLIB_PATH ?= $(ROOT)/build/onnxruntime/libonnxruntime.so.1.31.1
 
-.PHONY: setup demo demo-geometry test test-rust test-python lint bench bench-pnp bench-pipeline clean
+.PHONY: setup demo demo-geometry test test-rust test-python lint bench bench-pnp bench-pipeline bench-detector clean
 
 setup:
 	@bash scripts/setup.sh
@@ -46,6 +46,14 @@ bench:
 bench-pnp: setup
 	cargo build --release -p conesight-core --example pnp_bench
 	$(PY) bench/pnp_vs_opencv.py --bench-bin target/release/examples/pnp_bench
+
+## Our detector against the Ultralytics YOLO11n peer on the real test frames (mAP per class,
+## recall by box height, ms per 1920x1200 frame): docs/detector-benchmark.md. The peer is
+## trained first by bench/yolo_peer_train.py (about two hours; see docs/detector-benchmark.md).
+PEER ?= build/peer/yolo11n-continue/weights/best.onnx
+bench-detector: setup
+	$(PY) bench/detector_vs_yolo.py --ours models/detector.onnx --peer $(PEER) \
+	  --markdown build/detector-benchmark.md --json build/detector-benchmark.json
 
 ## In-process vs over Zenoh (4 processes): per-stage latency, rate sweep, bus cost ratio.
 bench-pipeline: setup

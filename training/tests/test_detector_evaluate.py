@@ -7,19 +7,11 @@ import json
 import cv2
 import numpy as np
 import pytest
+from detector_setup import tiny_run
 
-from conesight_train.detector.augment import DetectorAugmentParams
-from conesight_train.detector.config import SourceSpec, TrainConfig
 from conesight_train.detector.data import RendererFrames, ToyFrames
 from conesight_train.detector.evaluate import main, shift_frame
-from conesight_train.detector.frame_input import FrameInputParams
-from conesight_train.detector.model import DetectorParams
 from conesight_train.detector.train import train
-
-SMALL_INPUT = FrameInputParams(input_width_px=128, input_height_px=96)
-TINY = DetectorParams(
-    stem_channels=8, stage_channels=(8, 16, 16, 16), stage_blocks=(1, 1, 1, 1), neck_channels=8
-)
 
 
 def write_renderer_folder(root, count):
@@ -60,19 +52,7 @@ def test_evaluate_labelled_and_unlabelled(tmp_path):
     write_renderer_folder(data, 3)
     frame = RendererFrames(data)[0]
     assert frame.ground is not None and len(frame.boxes_px) > 0
-    config = TrainConfig(
-        sources=[SourceSpec(str(data))],
-        val=str(data),
-        out=str(tmp_path / "run"),
-        steps=2,
-        batch_size=2,
-        val_every=2,
-        warmup_steps=1,
-        workers=0,
-        input=SMALL_INPUT,
-        augment=DetectorAugmentParams(crop_width_px=96, crop_height_px=64),
-        model=TINY,
-    )
+    config = tiny_run(str(data), str(data), tmp_path / "run")
     train(config, progress=False)
     out = tmp_path / "eval.json"
     main(
@@ -170,19 +150,7 @@ def test_shifted_frames_keep_their_cones_on_the_boxes():
 
 def test_evaluate_a_yolo_split_with_a_shift(tmp_path):
     split = write_yolo_split(tmp_path / "ds", 3)
-    config = TrainConfig(
-        sources=[SourceSpec(f"yolo:{split}")],
-        val=f"yolo:{split}",
-        out=str(tmp_path / "run"),
-        steps=2,
-        batch_size=2,
-        val_every=2,
-        warmup_steps=1,
-        workers=0,
-        input=SMALL_INPUT,
-        augment=DetectorAugmentParams(crop_width_px=96, crop_height_px=64),
-        model=TINY,
-    )
+    config = tiny_run(f"yolo:{split}", f"yolo:{split}", tmp_path / "run")
     train(config, progress=False)
     out = tmp_path / "real.json"
     main(

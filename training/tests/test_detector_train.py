@@ -6,22 +6,14 @@ import numpy as np
 import onnx
 import pytest
 import torch
+from detector_setup import SMALL_CROP, SMALL_INPUT, TINY, tiny_run
 
-from conesight_train.detector.augment import DetectorAugmentParams
-from conesight_train.detector.config import SourceSpec, TrainConfig
 from conesight_train.detector.data import ToyFrames
 from conesight_train.detector.dataset import FrameDataset, MixedDataset
-from conesight_train.detector.frame_input import FrameInputParams
 from conesight_train.detector.loss import detector_loss
 from conesight_train.detector.model import ConeDetector, DetectorParams, multiply_accumulates
 from conesight_train.detector.onnx_export import compare_with_pytorch, export_onnx
 from conesight_train.detector.train import load_checkpoint, lr_factor, train
-
-SMALL_INPUT = FrameInputParams(input_width_px=128, input_height_px=96)
-SMALL_CROP = DetectorAugmentParams(crop_width_px=96, crop_height_px=64)
-TINY = DetectorParams(
-    stem_channels=8, stage_channels=(16, 16, 24, 32), stage_blocks=(1, 1, 1, 1), neck_channels=16
-)
 
 
 def test_a_few_steps_lower_the_loss_on_a_fixed_batch():
@@ -43,18 +35,8 @@ def test_a_few_steps_lower_the_loss_on_a_fixed_batch():
 
 
 def test_training_run_checkpoints_and_resumes(tmp_path):
-    config = TrainConfig(
-        sources=[SourceSpec("toy:16")],
-        val="toy:4:9",
-        out=str(tmp_path),
-        steps=6,
-        batch_size=4,
-        val_every=3,
-        warmup_steps=2,
-        workers=0,
-        input=SMALL_INPUT,
-        augment=SMALL_CROP,
-        model=TINY,
+    config = tiny_run(
+        "toy:16", "toy:4:9", tmp_path, steps=6, batch_size=4, val_every=3, warmup_steps=2
     )
     summary = train(config, progress=False)
     assert summary["steps"] == 6 and len(summary["history"]) == 6
@@ -69,20 +51,7 @@ def test_training_run_checkpoints_and_resumes(tmp_path):
 
 
 def test_wall_clock_budget_stops_the_run_and_decays_the_rate(tmp_path):
-    config = TrainConfig(
-        sources=[SourceSpec("toy:16")],
-        val="",
-        out=str(tmp_path),
-        steps=10_000,
-        max_minutes=0.05,
-        batch_size=2,
-        val_every=10_000,
-        warmup_steps=1,
-        workers=0,
-        input=SMALL_INPUT,
-        augment=SMALL_CROP,
-        model=TINY,
-    )
+    config = tiny_run("toy:16", "", tmp_path, steps=10_000, max_minutes=0.05, val_every=10_000)
     summary = train(config, progress=False)
     assert 1 <= summary["steps"] < 10_000
     assert summary["seconds"] >= 3.0

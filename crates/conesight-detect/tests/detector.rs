@@ -32,6 +32,21 @@ fn ultralytics_config() -> DetectorConfig {
     }
 }
 
+/// The three cones both Ultralytics fixtures hold (the unknown one and the weak one dropped),
+/// in the 128x64 frame's pixels (OpenCV edges).
+fn assert_fixture_cones(dets: &[conesight_detect::Detection]) {
+    let summary: Vec<(ConeClass, f32, [f32; 4])> =
+        dets.iter().map(|d| (d.class, d.score, d.bbox_px)).collect();
+    assert_eq!(
+        summary,
+        vec![
+            (ConeClass::Blue, 0.9, [55.5, 15.5, 71.5, 47.5]),
+            (ConeClass::Yellow, 0.7, [15.5, 17.5, 23.5, 37.5]),
+            (ConeClass::LargeOrange, 0.6, [93.5, 11.5, 105.5, 35.5]),
+        ]
+    );
+}
+
 #[test]
 fn frame_layout_matches_the_python_pipeline_without_a_card() {
     let model = data("tiny_frame.onnx");
@@ -73,17 +88,7 @@ fn ultralytics_adapter_letterboxes_maps_classes_and_suppresses() {
         Detector::load(&data("ultralytics_const.onnx"), &ultralytics_config()).expect("loads");
     // 128x64 frame -> scale 0.5 into 64x32, pasted 16 rows down in the 64x64 input.
     let frame = RgbImage::from_pixel(128, 64, image::Rgb([90, 120, 60]));
-    let dets = detector.detect(&frame).expect("detects");
-    let summary: Vec<(ConeClass, f32, [f32; 4])> =
-        dets.iter().map(|d| (d.class, d.score, d.bbox_px)).collect();
-    assert_eq!(
-        summary,
-        vec![
-            (ConeClass::Blue, 0.9, [55.5, 15.5, 71.5, 47.5]),
-            (ConeClass::Yellow, 0.7, [15.5, 17.5, 23.5, 37.5]),
-            (ConeClass::LargeOrange, 0.6, [93.5, 11.5, 105.5, 35.5]),
-        ]
-    );
+    assert_fixture_cones(&detector.detect(&frame).expect("detects"));
     // Thresholds from the config override the card's and the defaults.
     let strict = DetectorConfig {
         thresholds: Some(Thresholds {
@@ -158,15 +163,5 @@ fn an_nms_in_graph_export_runs_from_its_metadata_alone() {
     assert_eq!(detector.card().input.shape, [1, 3, 64, 64]);
     // 128x64 frame -> scale 0.5 into 64x32, pasted 16 rows down in the 64x64 input.
     let frame = RgbImage::from_pixel(128, 64, image::Rgb([90, 120, 60]));
-    let dets = detector.detect(&frame).expect("detects");
-    let summary: Vec<(ConeClass, f32, [f32; 4])> =
-        dets.iter().map(|d| (d.class, d.score, d.bbox_px)).collect();
-    assert_eq!(
-        summary,
-        vec![
-            (ConeClass::Blue, 0.9, [55.5, 15.5, 71.5, 47.5]),
-            (ConeClass::Yellow, 0.7, [15.5, 17.5, 23.5, 37.5]),
-            (ConeClass::LargeOrange, 0.6, [93.5, 11.5, 105.5, 35.5]),
-        ]
-    );
+    assert_fixture_cones(&detector.detect(&frame).expect("detects"));
 }

@@ -330,6 +330,15 @@ def main(argv: list[str] | None = None) -> int:
         type=Path,
         default=REPO_ROOT.parent / "shared/data/real-dev/fsoco-keypoint-crops",
     )
+    parser.add_argument(
+        "--detector", type=Path, default=REPO_ROOT / "models/detector.onnx", help="for real frames"
+    )
+    parser.add_argument(
+        "--real-frames",
+        type=Path,
+        default=REPO_ROOT.parent / "shared/data/real-train/fsoco-boxes/test",
+        help="real labelled test frames (YOLO split folder), never trained on",
+    )
     parser.add_argument("--command", default="make eval", help="the command, for the report")
     parser.add_argument("--started-at", type=float, help="Unix time the command started")
     parser.add_argument("--check-seeds", type=int, nargs="+", default=[100])
@@ -436,6 +445,15 @@ def main(argv: list[str] | None = None) -> int:
             "reason": f"detector `{(detector_entry or {}).get('path')}`: {reason}",
         }
 
+    # 1b. Detection on real frames.
+    from conesight_train.report.real_detector import real_detection
+
+    real_det = json_safe(
+        real_detection(args.detector, args.real_frames, args.records / "real-detections")
+    )
+    if not real_det["available"]:
+        missing.append(f"detector on real frames: {real_det['reason']}")
+
     results: dict[str, Any] = {
         "run": {
             "command": args.command,
@@ -462,6 +480,7 @@ def main(argv: list[str] | None = None) -> int:
         },
         "models": models,
         "detection": detection,
+        "real_detection": real_det,
         "keypoints": keypoints,
         "accuracy_3d": accuracy,
         "perturbation": metrics.perturbation_summary(records.perturbation),

@@ -68,6 +68,56 @@ def keypoint_section(kp: dict[str, Any]) -> list[str]:
     return out
 
 
+def real_detection_section(real: dict[str, Any]) -> list[str]:
+    """Section 1b: the detector on real frames it never trained on."""
+    lines = ["### 1b. Detection on real frames", ""]
+    if not real.get("available"):
+        return [*lines, f"Not available: {real.get('reason', 'not run')}.", ""]
+    m = real["metrics"]
+    lines += [
+        f"`{real['model']}` on the {real['frames']} frames of `{real['data']}` (FSOCO, teams AMZ "
+        "and KA-RaceIng, never trained on), whole frames, no calibration; every labelled cone "
+        "counts (`unknown_cone` boxes are ignore regions); IoU >= 0.5. P/R at the card's "
+        f"operating score {m['score_threshold']:g}.",
+        "",
+        table(
+            ["class", "AP@0.5", "cones"],
+            [[name, fmt(row["ap50"]), str(row["truths"])] for name, row in m["per_class"].items()]
+            + [["**mean (mAP@0.5)**", f"**{fmt(m['map50'])}**", ""]],
+        ),
+        "",
+        f"Precision {fmt(m['precision'])}, recall {fmt(m['recall'])}; recall of cones at least "
+        f"20 px tall {fmt(m['recall_at_least_20px'])}.",
+        "",
+        table(
+            ["box height", "recall", "cones"],
+            [
+                [band, fmt(row["recall"]), str(row["truths"])]
+                for band, row in m["recall_by_height"].items()
+            ],
+        ),
+        "",
+        "The same frames moved by a quarter of their height (what a camera pitched by about "
+        "that much sees; the uncovered rows grey; cones that leave the frame are not counted), "
+        "still with no calibration:",
+        "",
+        table(
+            ["shift", "mAP@0.5", "precision", "recall"],
+            [["none", fmt(m["map50"]), fmt(m["precision"]), fmt(m["recall"])]]
+            + [
+                [shift, fmt(row["map50"]), fmt(row["precision"]), fmt(row["recall"])]
+                for shift, row in real["shifted"].items()
+            ],
+        ),
+        "",
+        f"Annotated frames (detections in class colours with their scores, missed cones in "
+        f"white) are written to `{real['png_dir']}` by this command; the repository holds no "
+        "real images nor images made from them.",
+        "",
+    ]
+    return lines
+
+
 def render(results: dict[str, Any]) -> str:
     """The whole report."""
     run = results["run"]
@@ -165,6 +215,7 @@ def render(results: dict[str, Any]) -> str:
     else:
         lines += [f"Not available: {det['reason']}.", ""]
 
+    lines += real_detection_section(results.get("real_detection") or {})
     lines += ["## 2. Keypoints", ""]
     kp = results["keypoints"]
     lines += [
