@@ -1,25 +1,29 @@
 # conesight: the two commands a fresh machine needs are `make demo` and `make test`.
-# Both run scripts/setup.sh first (idempotent, cached in build/): ONNX Runtime library from the
-# onnxruntime==1.31.1 wheel, a Python venv with the tools, Debian packages if missing.
+# Both run scripts/setup.sh first (idempotent, cached in build/): `make demo` only what running
+# needs (Debian packages, the ONNX Runtime library from the onnxruntime==1.31.1 wheel; no
+# PyTorch), `make test` also the Python tools and the training stack in build/venv.
 
 SHELL := /bin/bash
 ROOT := $(CURDIR)
 PY := $(ROOT)/build/venv/bin/python
 export ORT_DYLIB_PATH ?= $(ROOT)/build/onnxruntime/libonnxruntime.so.1.31.1
 
-.PHONY: setup demo demo-geometry test test-rust test-python lint bench bench-pnp bench-pipeline bench-detector clean
+.PHONY: setup setup-runtime demo demo-geometry test test-rust test-python lint bench bench-pnp bench-pipeline bench-detector clean
 
 setup:
-	@bash scripts/setup.sh
+	@bash scripts/setup.sh all
+
+setup-runtime:
+	@bash scripts/setup.sh runtime
 
 ## The main job on the embedded defaults: the four services in one process over an embedded
 ## Zenoh session on a synthetic sequence (live table, PNGs in out/run/).
-demo: setup
+demo: setup-runtime
 	cargo build --release -p conesight-cli
 	./target/release/conesight run
 
 ## The geometry demo (cone PnP on exact keypoints, one rendered frame), PNGs in out/demo/.
-demo-geometry: setup
+demo-geometry: setup-runtime
 	cargo build --release -p conesight-cli
 	./target/release/conesight demo
 
@@ -67,7 +71,7 @@ clean:
 DEPLOY_COMPOSE ?= $(shell docker compose version >/dev/null 2>&1 && echo "docker compose" || echo docker-compose)
 .PHONY: images compose-up compose-down deploy-check
 
-images: setup
+images: setup-runtime
 	deploy/build-images.sh
 
 compose-up:

@@ -1,10 +1,24 @@
 #!/usr/bin/env bash
-# Installs everything conesight needs on a fresh machine, idempotently, into build/:
-#   build/venv/                         Python virtual environment (requirements below)
-#   build/onnxruntime/libonnxruntime.so.1.31.1   ONNX Runtime shared library for `ort` (load-dynamic),
-#                                       taken from the PyPI wheel onnxruntime==1.31.1
+# Installs what conesight needs on a fresh machine, idempotently, into build/.
+#
+#   scripts/setup.sh runtime   what running needs (`make demo`, `make images`): Debian packages,
+#                              build/onnxruntime/libonnxruntime.so.1.31.1 (ONNX Runtime for `ort`,
+#                              load-dynamic, taken from the PyPI wheel onnxruntime==1.31.1) and an
+#                              empty build/venv whose pip fetches that wheel. No PyTorch.
+#   scripts/setup.sh [all]     also the Python tools and the training stack in build/venv
+#                              (scripts/requirements.txt, training/requirements.txt: PyTorch from
+#                              PyPI, ~6 GB) for `make test`, `make lint`, `make eval`, training.
+#
 # Re-running is cheap: each step is skipped when its stamp matches its inputs.
 set -euo pipefail
+MODE="${1:-all}"
+case "$MODE" in
+  runtime | all) ;;
+  *)
+    echo "usage: scripts/setup.sh [runtime|all]  (got '$MODE')" >&2
+    exit 2
+    ;;
+esac
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 BUILD="$ROOT/build"
@@ -39,7 +53,7 @@ if [ ! -x "$VENV/bin/python" ]; then
   log "creating Python virtual environment in $VENV"
   "$PYTHON" -m venv "$VENV"
 fi
-if [ "$(cat "$VENV/.stamp" 2>/dev/null)" != "$stamp_inputs" ]; then
+if [ "$MODE" = all ] && [ "$(cat "$VENV/.stamp" 2>/dev/null)" != "$stamp_inputs" ]; then
   log "installing Python packages (scripts/requirements.txt, training/requirements.txt)"
   "$VENV/bin/python" -m pip install -q --upgrade pip
   "$VENV/bin/python" -m pip install -q -r "$REQ"
@@ -61,4 +75,8 @@ if [ ! -f "$ORT_LIB" ]; then
   log "ONNX Runtime library at $ORT_LIB"
 fi
 
-log "ready: ORT_DYLIB_PATH=$ORT_LIB, Python at $VENV/bin/python"
+if [ "$MODE" = all ]; then
+  log "ready: ORT_DYLIB_PATH=$ORT_LIB, Python at $VENV/bin/python"
+else
+  log "ready to run: ORT_DYLIB_PATH=$ORT_LIB (no Python packages: \`scripts/setup.sh all\` for tests and training)"
+fi
