@@ -4,6 +4,7 @@
 //! `--services` runs a subset, so the same binary serves a split deployment.
 
 use std::collections::BTreeMap;
+use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -109,6 +110,10 @@ pub struct RunArgs {
     /// Output folder for the PNGs.
     #[arg(long, default_value = "out/run")]
     out: PathBuf,
+    /// Log file. Default: `<out>/conesight.log` when stdout is a terminal (the live table is
+    /// drawn there), else stderr.
+    #[arg(long = "log-file")]
+    log_file: Option<PathBuf>,
 }
 
 /// Every `ANNOTATE_EVERY`-th frame (and the last) is written as an annotated PNG.
@@ -128,7 +133,20 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
 type Task = tokio::task::JoinHandle<anyhow::Result<()>>;
 
 async fn run_async(args: RunArgs) -> anyhow::Result<()> {
-    conesight_service::init_tracing();
+    // Log lines never interleave with the live table: on a terminal they go to a file.
+    let log_file = args.log_file.clone().or_else(|| {
+        std::io::stdout()
+            .is_terminal()
+            .then(|| args.out.join("conesight.log"))
+    });
+    match &log_file {
+        Some(path) => {
+            conesight_service::init_tracing_to_file(path)
+                .context("opening the log file (choose another with --log-file)")?;
+            println!("logs: {}", path.display());
+        }
+        None => conesight_service::init_tracing(),
+    }
     let shutdown = Shutdown::new();
     shutdown.trigger_on_signal();
     let has = |s: ServiceName| args.services.contains(&s);

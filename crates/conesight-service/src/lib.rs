@@ -3,7 +3,8 @@
 //! What every conesight service shares, so each `main.rs` stays thin.
 //!
 //! Modules:
-//! - `telemetry`: [`init_tracing`] from `RUST_LOG` (default `info`).
+//! - `telemetry`: [`init_tracing`] (stderr) or [`init_tracing_to_file`] from `RUST_LOG`
+//!   (default `info`).
 //! - `shutdown`: [`shutdown_signal`], resolving on SIGTERM or SIGINT.
 //! - [`metrics`]: [`Metrics`], a Prometheus registry with frames received/processed/dropped,
 //!   errors by kind, per-stage latency histograms and the queue depth.
@@ -33,5 +34,5 @@ pub use healthcheck::{HealthcheckArgs, HealthcheckError, healthcheck};
 pub use http::{HttpArgs, HttpState, router, serve};
 pub use metrics::Metrics;
 pub use shutdown::shutdown_signal;
-pub use telemetry::init_tracing;
+pub use telemetry::{init_tracing, init_tracing_to_file};
 pub use worker::{Submitter, Worker};

@@ -1,4 +1,11 @@
-//! Tracing set-up, once per process, from `RUST_LOG`.
+//! Tracing set-up, once per process, from `RUST_LOG`. Logs go to stderr (stdout is left to a
+//! command's own output, e.g. `conesight run`'s live table or `predict`'s JSON lines), or to a
+//! file.
+
+use std::fs::{File, OpenOptions};
+use std::io::IsTerminal;
+use std::path::Path;
+use std::sync::Mutex;
 
 use tracing_subscriber::EnvFilter;
 
@@ -7,14 +14,42 @@ use tracing_subscriber::EnvFilter;
 pub(crate) const DEFAULT_LOG_FILTER: &str =
     "info,ort=warn,zenoh=warn,zenoh_transport=warn,zenoh_link_tcp=warn,zenoh_shm=warn";
 
-/// Installs a formatting subscriber filtered by `RUST_LOG` (default: our crates at info, ort and zenoh at warn).
-/// A second call does nothing (tests may call it from many places).
+fn filter() -> EnvFilter {
+    EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new(DEFAULT_LOG_FILTER))
+}
+
+/// Installs a formatting subscriber on stderr (colours only on a terminal) filtered by `RUST_LOG` (default: our crates at
+/// info, ort and zenoh at warn). A second call does nothing (tests may call it from many places).
 pub fn init_tracing() {
-    let filter =
-        EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new(DEFAULT_LOG_FILTER));
     // Err only when a subscriber is already installed, which is fine.
     let _ = tracing_subscriber::fmt()
-        .with_env_filter(filter)
+        .with_env_filter(filter())
         .with_target(true)
+        .with_ansi(std::io::stderr().is_terminal())
+        .with_writer(std::io::stderr)
         .try_init();
+}
+
+/// Like [`init_tracing`], but appends the log lines (no colours) to `path`, creating it and
+/// its folder: for a command that draws on the terminal, so log lines never land inside
+/// what it draws.
+///
+/// # Errors
+/// The file cannot be created or opened for appending (the message names it).
+pub fn init_tracing_to_file(path: &Path) -> std::io::Result<()> {
+    let open = || -> std::io::Result<File> {
+        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+            std::fs::create_dir_all(dir)?;
+        }
+        OpenOptions::new().create(true).append(true).open(path)
+    };
+    let file = open()
+        .map_err(|e| std::io::Error::new(e.kind(), format!("log file {}: {e}", path.display())))?;
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter())
+        .with_target(true)
+        .with_ansi(false)
+        .with_writer(Mutex::new(file))
+        .try_init();
+    Ok(())
 }
