@@ -64,7 +64,7 @@ def tiny_exports(tmp_path_factory):
     exports = {}
     for nms in (False, True):
         path = model.export(format="onnx", imgsz=[96, 160], nms=nms, simplify=False, verbose=False)
-        exports[nms] = shutil.copy(path, work / f"tiny-nms{int(nms)}.onnx")
+        exports[nms] = shutil.move(path, work / f"tiny-nms{int(nms)}.onnx")
     rng = np.random.default_rng(0)
     image = cv2.GaussianBlur(rng.integers(0, 256, (192, 320, 3), dtype=np.uint8), (5, 5), 2)
     cv2.imwrite(str(work / "frame.png"), image)

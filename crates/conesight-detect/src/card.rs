@@ -99,12 +99,18 @@ impl ModelCard {
             path: path.to_path_buf(),
             message: e.to_string(),
         })?;
-        serde_json::from_str(&text).map_err(|e| DetectError::CardRead {
-            path: path.to_path_buf(),
-            message: format!(
-                "{e} (a card of the horizon-band detector? re-export the model with \
-                 `python -m conesight_train.detector.onnx_export`)"
-            ),
+        serde_json::from_str(&text).map_err(|e| {
+            let hint = if text.contains("conesight_band") {
+                "a card of the retired horizon-band detector: re-export the model with \
+                 `python -m conesight_train.detector.onnx_export`"
+            } else {
+                "not a valid JSON model card: fix it, or delete it when the ONNX file carries \
+                 its own metadata (Ultralytics exports do)"
+            };
+            DetectError::CardRead {
+                path: path.to_path_buf(),
+                message: format!("{e} ({hint})"),
+            }
         })
     }
 

@@ -77,19 +77,27 @@ pub fn frame_input<C: Deref<Target = [u8]>>(
         });
     }
     let (rw, rh) = resized_size(width, height, params);
-    let resized = resize_rgb(frame.as_raw(), width as usize, height as usize, rw, rh);
     let (w_in, h_in) = (
         params.input_width_px as usize,
         params.input_height_px as usize,
     );
     let plane = w_in * h_in;
     let mut data = vec![LETTERBOX_FILL; 3 * plane];
-    for y in 0..rh {
-        let row = &resized[y * rw * 3..(y + 1) * rw * 3];
-        for (x, px) in row.chunks_exact(3).enumerate() {
-            data[y * w_in + x] = px[0];
-            data[plane + y * w_in + x] = px[1];
-            data[2 * plane + y * w_in + x] = px[2];
+    let (w, h) = (width as usize, height as usize);
+    let factor = w / rw.max(1);
+    if factor >= 1 && w == factor * rw && h == factor * rh {
+        // An integer factor (1920x1200 into 960x608: 2): the k x k block mean, rounded half
+        // up as OpenCV's INTER_AREA does on uint8, straight into the planes.
+        block_mean_into(frame.as_raw(), w, factor, rw, rh, w_in, plane, &mut data);
+    } else {
+        let resized = resize_rgb(frame.as_raw(), w, h, rw, rh);
+        for y in 0..rh {
+            let row = &resized[y * rw * 3..(y + 1) * rw * 3];
+            for (x, px) in row.chunks_exact(3).enumerate() {
+                data[y * w_in + x] = px[0];
+                data[plane + y * w_in + x] = px[1];
+                data[2 * plane + y * w_in + x] = px[2];
+            }
         }
     }
     let mapping = InputMapping {
@@ -105,6 +113,85 @@ pub fn frame_input<C: Deref<Target = [u8]>>(
         },
         mapping,
     ))
+}
+
+/// `k x k` block means of interleaved RGB8 rows (`width` pixels each) into the first `rw x rh`
+/// cells of three planes of `w_in`-wide rows; integer sums, `(sum + k^2 / 2) / k^2`.
+#[allow(clippy::too_many_arguments)]
+fn block_mean_into(
+    raw: &[u8],
+    width: usize,
+    k: usize,
+    rw: usize,
+    rh: usize,
+    w_in: usize,
+    plane: usize,
+    data: &mut [f32],
+) {
+    match k {
+        1 => block_mean::<1>(raw, width, rw, rh, w_in, plane, data),
+        2 => block_mean::<2>(raw, width, rw, rh, w_in, plane, data),
+        3 => block_mean::<3>(raw, width, rw, rh, w_in, plane, data),
+        4 => block_mean::<4>(raw, width, rw, rh, w_in, plane, data),
+        _ => {
+            let area = (k * k) as u32;
+            for y in 0..rh {
+                for x in 0..rw {
+                    let mut acc = [0u32; 3];
+                    for dy in 0..k {
+                        let row = &raw[((y * k + dy) * width + x * k) * 3..][..k * 3];
+                        for px in row.chunks_exact(3) {
+                            acc[0] += u32::from(px[0]);
+                            acc[1] += u32::from(px[1]);
+                            acc[2] += u32::from(px[2]);
+                        }
+                    }
+                    for (c, sum) in acc.iter().enumerate() {
+                        data[c * plane + y * w_in + x] = ((sum + area / 2) / area) as f32;
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// [`block_mean_into`] for a factor known at compile time (the loops unroll).
+fn block_mean<const K: usize>(
+    raw: &[u8],
+    width: usize,
+    rw: usize,
+    rh: usize,
+    w_in: usize,
+    plane: usize,
+    data: &mut [f32],
+) {
+    let area = (K * K) as u32;
+    let stride = width * 3;
+    let (red, rest) = data.split_at_mut(plane);
+    let (green, blue) = rest.split_at_mut(plane);
+    for y in 0..rh {
+        let block = &raw[y * K * stride..(y + 1) * K * stride];
+        let out = y * w_in..y * w_in + rw;
+        for (x, ((r, g), b)) in red[out.clone()]
+            .iter_mut()
+            .zip(&mut green[out.clone()])
+            .zip(&mut blue[out])
+            .enumerate()
+        {
+            let mut acc = [0u32; 3];
+            for dy in 0..K {
+                let px = &block[dy * stride + x * K * 3..][..K * 3];
+                for dx in 0..K {
+                    acc[0] += u32::from(px[dx * 3]);
+                    acc[1] += u32::from(px[dx * 3 + 1]);
+                    acc[2] += u32::from(px[dx * 3 + 2]);
+                }
+            }
+            *r = ((acc[0] + area / 2) / area) as f32;
+            *g = ((acc[1] + area / 2) / area) as f32;
+            *b = ((acc[2] + area / 2) / area) as f32;
+        }
+    }
 }
 
 /// The Ultralytics letterbox input of `frame` at `width x height` (see the module docs).
@@ -181,6 +268,39 @@ mod tests {
                 ((x * 7 + y * 3) % 256) as u8,
             ])
         })
+    }
+
+    /// The integer-factor fast path gives what the general resampler gives (factors 1-3).
+    #[test]
+    fn integer_factors_match_the_general_resize() {
+        for (k, (w, h)) in [(1usize, (16u32, 10u32)), (2, (32, 20)), (3, (48, 30))] {
+            let frame = RgbImage::from_fn(w, h, |x, y| {
+                image::Rgb([
+                    ((x * 37 + y * 11) % 256) as u8,
+                    ((x * 5 + y * 91) % 256) as u8,
+                    ((x * y + 3) % 256) as u8,
+                ])
+            });
+            let params = FrameInputParams {
+                input_width_px: 16,
+                input_height_px: 12,
+            };
+            let (tensor, _) = frame_input(&frame, &params).unwrap();
+            let (rw, rh) = (w as usize / k, h as usize / k);
+            let general = resize_rgb(frame.as_raw(), w as usize, h as usize, rw, rh);
+            let plane = 16 * 12;
+            for y in 0..rh {
+                for x in 0..rw {
+                    for c in 0..3 {
+                        assert_eq!(
+                            tensor.data[c * plane + y * 16 + x],
+                            general[(y * rw + x) * 3 + c],
+                            "factor {k}, pixel ({x}, {y}), channel {c}"
+                        );
+                    }
+                }
+            }
+        }
     }
 
     #[test]

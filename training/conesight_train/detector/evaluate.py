@@ -37,7 +37,13 @@ from conesight_train.detector.augment import to_input
 from conesight_train.detector.config import open_source
 from conesight_train.detector.data import IMAGE_SUFFIXES, FrameSource, LabelledFrame, read_rgb
 from conesight_train.detector.frame_input import FILL, FrameInputParams
-from conesight_train.detector.metrics import WORKING_RANGE_M, ImageResult, evaluate, match
+from conesight_train.detector.metrics import (
+    WORKING_RANGE_M,
+    ImageResult,
+    evaluate,
+    finite_json,
+    match,
+)
 from conesight_train.detector.model import CLASS_NAMES, ExportHead
 from conesight_train.detector.postprocess import Thresholds
 from conesight_train.detector.predict import detections_in_frame, frame_result
@@ -254,7 +260,7 @@ def main(argv: list[str] | None = None) -> None:
         report = {"frames": len(frames), "counts": counts}
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(report, indent=2) + "\n")
+        args.json.write_text(json.dumps(finite_json(report), indent=2, allow_nan=False) + "\n")
 
 
 if __name__ == "__main__":

@@ -211,3 +211,16 @@ def evaluate(
         "recall_at_least_20px": float(height_found[1:].sum() / tall) if tall else float("nan"),
         "recall_within_20m": near_found / near_total if near_total else float("nan"),
     }
+
+
+def finite_json(value: object) -> object:
+    """`value` with every NaN or infinite float replaced by None, so that it serialises as
+    strict JSON (`null`): Python writes `NaN`, which JSON readers such as serde_json (the
+    model card reader in crates/conesight-detect) refuse. A recall over zero cones is NaN."""
+    if isinstance(value, dict):
+        return {k: finite_json(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [finite_json(v) for v in value]
+    if isinstance(value, (float, np.floating)):
+        return float(value) if np.isfinite(value) else None
+    return value

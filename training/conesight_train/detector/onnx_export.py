@@ -22,6 +22,7 @@ import onnxruntime as ort
 import torch
 
 from conesight_train.detector.frame_input import FrameInputParams
+from conesight_train.detector.metrics import finite_json
 from conesight_train.detector.model import CLASS_NAMES, ConeDetector, ExportHead
 from conesight_train.detector.postprocess import Thresholds
 
@@ -179,7 +180,7 @@ def main(argv: list[str] | None = None) -> None:
     metrics = json.loads(args.metrics.read_text()) if args.metrics else None
     card = model_card(args.out, config_dict, parity, metrics)
     card_path = args.out.with_suffix(".card.json")
-    card_path.write_text(json.dumps(card, indent=2) + "\n")
+    card_path.write_text(json.dumps(finite_json(card), indent=2, allow_nan=False) + "\n")
     print(f"wrote {args.out} ({size / 1e6:.2f} MB) and {card_path}; parity {parity}")
 
 
