@@ -30,6 +30,7 @@ demo-geometry: setup-runtime
 ## Every test: Rust (unit, property, integration) and Python.
 test: setup
 	cargo test --workspace
+	PROFILE=debug bash scripts/on_your_car.sh
 	$(MAKE) --no-print-directory test-python
 
 test-python: setup
@@ -53,8 +54,8 @@ bench-pnp: setup
 
 ## Our detector against the Ultralytics YOLO11n peer on the real test frames (mAP per class,
 ## recall by box height, ms per 1920x1200 frame): docs/detector-benchmark.md. The peer is
-## trained first by bench/yolo_peer_train.py (about two hours; see docs/detector-benchmark.md).
-PEER ?= build/peer/yolo11n-continue/weights/best.onnx
+## trained first by bench/yolo_peer_train.py (see docs/detector-benchmark.md).
+PEER ?= build/peer/yolo11n/weights/best.onnx
 bench-detector: setup
 	$(PY) bench/detector_vs_yolo.py --ours models/detector.onnx --peer $(PEER) \
 	  --markdown build/detector-benchmark.md --json build/detector-benchmark.json

@@ -29,7 +29,7 @@ def model_file(card: dict) -> str:
 
 
 def is_detector(card: dict) -> bool:
-    return card.get("format") == "conesight-detector-card-v1"
+    return str(card.get("format", "")).startswith("conesight-detector-card-")
 
 
 @pytest.mark.parametrize("card_path", CARDS, ids=lambda p: p.name)

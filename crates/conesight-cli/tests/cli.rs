@@ -294,3 +294,118 @@ fn keypoints_on_tight_crops_match_the_rendered_keypoints() {
     // The shipped network: ~0.7 px at 80x80 on held-out patches; these crops are 30-110 px tall.
     assert!(mean < 2.0, "mean keypoint error {mean:.2} px");
 }
+
+/// README's quickstart, as written there: the `conesight predict` line of its "Predict on an
+/// image" block runs from the checkout on the shipped sample frame (`docs/sample/`, rendered
+/// with seed 7, truth in `truth.json`) and finds the near cones where they are.
+#[test]
+fn readme_quickstart_predicts_the_sample_frame() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let readme = std::fs::read_to_string(root.join("README.md")).unwrap();
+    let command = readme
+        .lines()
+        .find(|l| l.starts_with("target/release/conesight predict "))
+        .expect("README.md has a `target/release/conesight predict ...` quickstart line");
+    let args: Vec<&str> = command.split_whitespace().skip(1).collect();
+    let output = Command::new(BIN)
+        .args(&args)
+        .current_dir(&root)
+        .output()
+        .unwrap();
+    eprintln!("{command}\n{}", String::from_utf8_lossy(&output.stderr));
+    assert!(output.status.success(), "{command}: {}", output.status);
+    let lines = json_lines(&output);
+    assert_eq!(lines.len(), 1);
+    let truth: Value = serde_json::from_str(
+        &std::fs::read_to_string(root.join("docs/sample/truth.json")).unwrap(),
+    )
+    .unwrap();
+    let near: Vec<[f64; 3]> = truth["cones"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|c| {
+            c["range_m"].as_f64().unwrap() < 15.0
+                && c["occlusion"].as_f64().unwrap() < 0.2
+                && c["truncation"].as_f64().unwrap() < 0.05
+        })
+        .map(|c| array3(&c["base_in_camera_m"]))
+        .collect();
+    assert!(near.len() >= 3, "the sample frame shows cones within 15 m");
+    let estimates: Vec<[f64; 3]> = lines[0]["cones"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|c| c["position_camera_m"].is_array())
+        .map(|c| array3(&c["position_camera_m"]))
+        .collect();
+    for t in &near {
+        let nearest = estimates
+            .iter()
+            .map(|e| distance(*e, *t))
+            .fold(f64::INFINITY, f64::min);
+        let relative = nearest / distance(*t, [0.0; 3]);
+        assert!(
+            relative < 0.1,
+            "the cone at {t:.2?} has no estimate within 10 % of its range ({relative:.3})"
+        );
+    }
+}
+
+/// `conesight run` keeps its table and its log apart: stdout carries the table and summary
+/// only, the log lines go to stderr, or to `--log-file` (on a terminal, `out/run/conesight.log`).
+#[test]
+fn run_keeps_log_lines_out_of_the_table() {
+    let dir = TempDir::new("run-log");
+    let out = dir.0.join("out");
+    let log = dir.0.join("logs/run.log");
+    let common = [
+        "run",
+        "--frames",
+        "4",
+        "--preload",
+        "2",
+        "--rate-hz",
+        "4",
+        "--boxes",
+        "truth",
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    let is_log_line = |l: &&str| {
+        [" INFO ", " WARN ", " ERROR "]
+            .iter()
+            .any(|k| l.contains(k))
+    };
+
+    let output = conesight(&common);
+    assert!(output.status.success());
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        stdout.contains("frames"),
+        "the table is on stdout:\n{stdout}"
+    );
+    let mixed: Vec<&str> = stdout.lines().filter(is_log_line).collect();
+    assert!(mixed.is_empty(), "log lines on stdout: {mixed:?}");
+    assert!(stderr.lines().any(|l| is_log_line(&l)), "no log on stderr");
+
+    let mut with_file = common.to_vec();
+    with_file.extend(["--log-file", log.to_str().unwrap()]);
+    let output = conesight(&with_file);
+    assert!(output.status.success());
+    let written = std::fs::read_to_string(&log).unwrap();
+    assert!(
+        written.lines().any(|l| is_log_line(&l)),
+        "log file: {written}"
+    );
+    assert!(
+        !written.contains('\u{1b}'),
+        "no colour codes in the log file"
+    );
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        !stderr.lines().any(|l| is_log_line(&l)),
+        "with --log-file nothing is logged on stderr: {stderr}"
+    );
+}

@@ -1,0 +1,93 @@
+#!/usr/bin/env bash
+# Runs the steps of docs/on-your-car.md that need no hardware, on the sample frame in
+# docs/sample/: calibration and extrinsics files as the guide writes them, predict with an ego
+# mask, and the two-host split on loopback (camera + localiser as separate services, detector +
+# keypoints in `conesight run`) until the localiser has published cones. Exits non-zero on the
+# first step that fails. `make test` runs it with PROFILE=debug (the test build's binaries);
+# by default it builds and uses the release binaries.
+set -euo pipefail
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$ROOT"
+PROFILE="${PROFILE:-release}"
+BIN_DIR="target/$PROFILE"
+export ORT_DYLIB_PATH="${ORT_DYLIB_PATH:-$ROOT/build/onnxruntime/libonnxruntime.so.1.31.1}"
+WORK="$(mktemp -d)"
+PIDS=()
+cleanup() {
+  for pid in "${PIDS[@]}"; do kill "$pid" 2>/dev/null || true; done
+  wait 2>/dev/null || true
+  rm -rf "$WORK"
+}
+trap cleanup EXIT
+step() { printf '\n[on-your-car] %s\n' "$*"; }
+
+step "building the binaries ($PROFILE)"
+profile_flag=()
+[ "$PROFILE" = release ] && profile_flag=(--release)
+cargo build "${profile_flag[@]}" -p conesight-cli -p conesight-camera-service -p conesight-localiser-service
+PATH="$ROOT/$BIN_DIR:$PATH"
+
+step "1-2. calibration (ROS camera_info) and extrinsics (measured mounting and the shortcut)"
+cp docs/sample/camera.yaml "$WORK/cam.yaml"
+cat > "$WORK/mount.yaml" <<'EOF'
+vehicle_from_camera:
+  translation_m: [0.0, 0.0, 0.908]
+  rotation:
+    rpy_rad: [-0.0144, 0.0419, 0.0]
+EOF
+cat > "$WORK/mount-shortcut.yaml" <<'EOF'
+vehicle_from_camera: {height_m: 0.908, pitch_down_rad: 0.0419}
+EOF
+cat > "$WORK/ego.yaml" <<'EOF'
+ego_mask_px: [[[0, 1200], [1920, 1200], [1920, 1150], [0, 1150]]]
+EOF
+
+step "3. one frame: predict with calibration, extrinsics and an ego mask"
+for mount in mount.yaml mount-shortcut.yaml; do
+  conesight predict --camera "$WORK/cam.yaml" --extrinsics "$WORK/$mount" \
+    --ego-mask "$WORK/ego.yaml" docs/sample/frame.jpg > "$WORK/predict.jsonl"
+  python3 - "$WORK/predict.jsonl" <<'EOF'
+import json, sys
+line = json.loads(open(sys.argv[1]).readline())
+placed = [c for c in line["cones"] if c.get("position_vehicle_m")]
+near = [c for c in placed if c["range_m"] < 15]
+print(f"{len(line['cones'])} cones, {len(placed)} placed in the vehicle frame, {len(near)} within 15 m")
+assert len(near) >= 3, "expected at least 3 cones within 15 m on the sample frame"
+for c in placed:
+    x, y, z = c["position_vehicle_m"]
+    assert x > 0, f"cone behind the car: {c['position_vehicle_m']}"
+    if c["range_m"] < 30:  # beyond, a small pitch error moves a cone far off the ground
+        assert abs(z) < 0.5, f"cone off the road: {c['position_vehicle_m']}"
+EOF
+done
+
+step "5. the split on loopback: camera + localiser services, detector + keypoints in conesight run"
+mkdir -p "$WORK/drive"
+cp docs/sample/frame.jpg "$WORK/drive/000000.jpg"
+PORT=$((17000 + RANDOM % 2000))
+conesight-camera --source folder --images "$WORK/drive" --camera-info "$WORK/cam.yaml" \
+  --extrinsics "$WORK/mount.yaml" --frame-encoding jpeg --rate-hz 2 \
+  --zenoh-listen "tcp/127.0.0.1:$PORT" --namespace onyourcar --http-addr 127.0.0.1:0 \
+  > "$WORK/camera.log" 2>&1 &
+PIDS+=($!)
+conesight-localiser --zenoh-connect "tcp/127.0.0.1:$PORT" --namespace onyourcar \
+  --http-addr "127.0.0.1:$((PORT + 1))" > "$WORK/localiser.log" 2>&1 &
+PIDS+=($!)
+conesight run --services detector,keypoints --zenoh-connect "tcp/127.0.0.1:$PORT" \
+  --namespace onyourcar --frames 0 --out "$WORK/run" > "$WORK/run.log" 2>&1 &
+PIDS+=($!)
+done_frames=0
+for _ in $(seq 1 120); do
+  sleep 1
+  done_frames="$(curl -fsS "http://127.0.0.1:$((PORT + 1))/metrics" 2>/dev/null \
+    | awk '/^conesight_frames_processed_total/ {print $2}' | head -1)"
+  done_frames="${done_frames:-0}"
+  if [ "${done_frames%.*}" -ge 2 ]; then break; fi
+done
+if [ "${done_frames%.*}" -lt 2 ]; then
+  echo "the localiser processed ${done_frames} frames in 120 s; logs:" >&2
+  tail -n 20 "$WORK"/*.log >&2
+  exit 1
+fi
+echo "localiser: ${done_frames} frames of cones from the split pipeline"
+step "done: the guide's steps ran"
