@@ -79,6 +79,22 @@ fn array3(value: &Value) -> [f64; 3] {
     [0, 1, 2].map(|i| a[i].as_f64().unwrap())
 }
 
+/// True base positions (camera frame) of the unoccluded, untruncated cones of a renderer
+/// annotation closer than `max_range_m`.
+fn whole_cones_within(labels: &Value, max_range_m: f64) -> Vec<[f64; 3]> {
+    labels["cones"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|c| {
+            c["range_m"].as_f64().unwrap() < max_range_m
+                && c["occlusion"].as_f64().unwrap() < 0.2
+                && c["truncation"].as_f64().unwrap() < 0.05
+        })
+        .map(|c| array3(&c["base_in_camera_m"]))
+        .collect()
+}
+
 fn distance(a: [f64; 3], b: [f64; 3]) -> f64 {
     a.iter()
         .zip(&b)
@@ -116,17 +132,7 @@ fn predict_locates_rendered_cones_and_reports_unreadable_images() {
     assert!(String::from_utf8_lossy(&output.stderr).contains("missing.png"));
 
     // Truth: unoccluded, untruncated cones within 20 m.
-    let truth: Vec<[f64; 3]> = labels["cones"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter(|c| {
-            c["range_m"].as_f64().unwrap() < 20.0
-                && c["occlusion"].as_f64().unwrap() < 0.2
-                && c["truncation"].as_f64().unwrap() < 0.05
-        })
-        .map(|c| array3(&c["base_in_camera_m"]))
-        .collect();
+    let truth = whole_cones_within(&labels, 20.0);
     assert!(
         truth.len() >= 5,
         "the seed-7 frame should show cones within 20 m"
@@ -320,17 +326,7 @@ fn readme_quickstart_predicts_the_sample_frame() {
         &std::fs::read_to_string(root.join("docs/sample/truth.json")).unwrap(),
     )
     .unwrap();
-    let near: Vec<[f64; 3]> = truth["cones"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter(|c| {
-            c["range_m"].as_f64().unwrap() < 15.0
-                && c["occlusion"].as_f64().unwrap() < 0.2
-                && c["truncation"].as_f64().unwrap() < 0.05
-        })
-        .map(|c| array3(&c["base_in_camera_m"]))
-        .collect();
+    let near = whole_cones_within(&truth, 15.0);
     assert!(near.len() >= 3, "the sample frame shows cones within 15 m");
     let estimates: Vec<[f64; 3]> = lines[0]["cones"]
         .as_array()
