@@ -9,6 +9,7 @@ command that makes them.
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Any
 
@@ -18,7 +19,13 @@ from conesight_train.detector.model import CLASS_NAMES
 from conesight_train.detector.real_frames import YoloFrames
 
 SHIFTS = (0.25, -0.25)
+REPO_ROOT = Path(__file__).resolve().parents[3]
 PNG_COUNT = 6
+
+
+def shown(path: Path) -> str:
+    """`path` as the report shows it: relative to the checkout (e.g. `../shared/...`)."""
+    return os.path.relpath(path.resolve(), REPO_ROOT)
 
 
 def real_detection(
@@ -34,12 +41,12 @@ def real_detection(
     results = run_frames(frames, runner, params, thresholds, png_dir, PNG_COUNT)
     out: dict[str, Any] = {
         "available": True,
-        "model": str(model),
-        "data": str(test_split),
+        "model": shown(model),
+        "data": shown(test_split),
         "frames": len(frames),
         "input": params.to_dict(),
         "metrics": evaluate(results, CLASS_NAMES, thresholds.score_threshold, max_range_m=None),
-        "png_dir": str(png_dir) if png_dir else None,
+        "png_dir": shown(png_dir) if png_dir else None,
         "shifted": {},
     }
     for shift in SHIFTS:
