@@ -84,12 +84,9 @@ pub fn frame_input<C: Deref<Target = [u8]>>(
     let plane = w_in * h_in;
     let mut data = vec![LETTERBOX_FILL; 3 * plane];
     let (w, h) = (width as usize, height as usize);
-    let factor = w / rw.max(1);
-    if factor >= 1 && w == factor * rw && h == factor * rh {
-        // An integer factor (1920x1200 into 960x608: 2): the k x k block mean, rounded half
-        // up as OpenCV's INTER_AREA does on uint8, straight into the planes.
-        block_mean_into(frame.as_raw(), w, factor, rw, rh, w_in, plane, &mut data);
-    } else {
+    // An integer factor (1920x1200 into 960x608: 2) is the k x k block mean, straight into
+    // the planes; any other size goes through the general resampler.
+    if !block_mean_into(frame.as_raw(), (w, h), (rw, rh), w_in, plane, &mut data) {
         let resized = resize_rgb(frame.as_raw(), w, h, rw, rh);
         for y in 0..rh {
             let row = &resized[y * rw * 3..(y + 1) * rw * 3];
@@ -115,44 +112,31 @@ pub fn frame_input<C: Deref<Target = [u8]>>(
     ))
 }
 
-/// `k x k` block means of interleaved RGB8 rows (`width` pixels each) into the first `rw x rh`
-/// cells of three planes of `w_in`-wide rows; integer sums, `(sum + k^2 / 2) / k^2`.
-#[allow(clippy::too_many_arguments)]
+/// When `size` is `(k rw, k rh)` for k in 1..=4: the `k x k` block means of the interleaved
+/// RGB8 frame into the first `rw x rh` cells of three planes of `w_in`-wide rows, integer sums
+/// rounded half up as OpenCV's INTER_AREA does on uint8, and `true`. Otherwise `false` and
+/// nothing written (the general resampler gives the same values, only slower).
 fn block_mean_into(
     raw: &[u8],
-    width: usize,
-    k: usize,
-    rw: usize,
-    rh: usize,
+    size: (usize, usize),
+    (rw, rh): (usize, usize),
     w_in: usize,
     plane: usize,
     data: &mut [f32],
-) {
-    match k {
-        1 => block_mean::<1>(raw, width, rw, rh, w_in, plane, data),
-        2 => block_mean::<2>(raw, width, rw, rh, w_in, plane, data),
-        3 => block_mean::<3>(raw, width, rw, rh, w_in, plane, data),
-        4 => block_mean::<4>(raw, width, rw, rh, w_in, plane, data),
-        _ => {
-            let area = (k * k) as u32;
-            for y in 0..rh {
-                for x in 0..rw {
-                    let mut acc = [0u32; 3];
-                    for dy in 0..k {
-                        let row = &raw[((y * k + dy) * width + x * k) * 3..][..k * 3];
-                        for px in row.chunks_exact(3) {
-                            acc[0] += u32::from(px[0]);
-                            acc[1] += u32::from(px[1]);
-                            acc[2] += u32::from(px[2]);
-                        }
-                    }
-                    for (c, sum) in acc.iter().enumerate() {
-                        data[c * plane + y * w_in + x] = ((sum + area / 2) / area) as f32;
-                    }
-                }
-            }
-        }
+) -> bool {
+    let (w, h) = size;
+    let k = w / rw.max(1);
+    if w != k * rw || h != k * rh {
+        return false;
     }
+    match k {
+        1 => block_mean::<1>(raw, w, rw, rh, w_in, plane, data),
+        2 => block_mean::<2>(raw, w, rw, rh, w_in, plane, data),
+        3 => block_mean::<3>(raw, w, rw, rh, w_in, plane, data),
+        4 => block_mean::<4>(raw, w, rw, rh, w_in, plane, data),
+        _ => return false,
+    }
+    true
 }
 
 /// [`block_mean_into`] for a factor known at compile time (the loops unroll).

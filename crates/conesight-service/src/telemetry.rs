@@ -14,20 +14,28 @@ use tracing_subscriber::EnvFilter;
 pub(crate) const DEFAULT_LOG_FILTER: &str =
     "info,ort=warn,zenoh=warn,zenoh_transport=warn,zenoh_link_tcp=warn,zenoh_shm=warn";
 
-fn filter() -> EnvFilter {
-    EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new(DEFAULT_LOG_FILTER))
-}
-
-/// Installs a formatting subscriber on stderr (colours only on a terminal) filtered by `RUST_LOG` (default: our crates at
-/// info, ort and zenoh at warn). A second call does nothing (tests may call it from many places).
-pub fn init_tracing() {
+/// Installs the one formatting subscriber of the process on `writer`, filtered by `RUST_LOG`
+/// (default [`DEFAULT_LOG_FILTER`]). A second call does nothing (tests may call it from many
+/// places).
+fn install<W>(writer: W, ansi: bool)
+where
+    W: for<'w> tracing_subscriber::fmt::MakeWriter<'w> + Send + Sync + 'static,
+{
+    let filter =
+        EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new(DEFAULT_LOG_FILTER));
     // Err only when a subscriber is already installed, which is fine.
     let _ = tracing_subscriber::fmt()
-        .with_env_filter(filter())
+        .with_env_filter(filter)
         .with_target(true)
-        .with_ansi(std::io::stderr().is_terminal())
-        .with_writer(std::io::stderr)
+        .with_ansi(ansi)
+        .with_writer(writer)
         .try_init();
+}
+
+/// Installs a formatting subscriber on stderr (colours only on a terminal) filtered by
+/// `RUST_LOG` (default: our crates at info, ort and zenoh at warn).
+pub fn init_tracing() {
+    install(std::io::stderr, std::io::stderr().is_terminal());
 }
 
 /// Like [`init_tracing`], but appends the log lines (no colours) to `path`, creating it and
@@ -45,11 +53,6 @@ pub fn init_tracing_to_file(path: &Path) -> std::io::Result<()> {
     };
     let file = open()
         .map_err(|e| std::io::Error::new(e.kind(), format!("log file {}: {e}", path.display())))?;
-    let _ = tracing_subscriber::fmt()
-        .with_env_filter(filter())
-        .with_target(true)
-        .with_ansi(false)
-        .with_writer(Mutex::new(file))
-        .try_init();
+    install(Mutex::new(file), false);
     Ok(())
 }
