@@ -1,8 +1,12 @@
 """Augmentation aimed at real photographs, on top of the renderer's own variety.
 
-Geometric (patch level, keypoints follow): scale and shift standing in for detector box jitter,
-horizontal mirror (left/right keypoints swap), truncation (a band at one side replaced by the
-crop rule's fill, as when a cone leaves the image), a neighbouring cone pasted at a side.
+Geometric (patch level, keypoints follow): rotation, scale and shift standing in for detector
+box jitter and for other labellers' framing (the paper's floor: rotation +-15 degrees, box scale
+0.8-1.5x, translation up to 50 % of the box edge; a draw that would put a keypoint where the
+network cannot reach it, closer than `edge_px` to the patch border, is drawn again, up to
+`geometric_tries` times, else the patch stays as it is), horizontal mirror (left/right
+keypoints swap), truncation (a band at one side replaced by the crop rule's fill, as when a
+cone leaves the image), a neighbouring cone pasted at a side.
 Photometric: per-channel colour gain and offset, gamma, Gaussian or motion blur, sensor noise,
 JPEG re-compression. Every draw comes from the Generator passed in, so results are seeded.
 
@@ -26,12 +30,16 @@ from conesight_train.keypoints import MIRROR_PERMUTATION
 class AugmentParams:
     """Probabilities and ranges of each augmentation (defaults: the training configuration)."""
 
-    # Down to 0.7: the real FSOCO crops, taken as boxes, show cones at 0.75x the size rendered
-    # tight boxes give (apex-to-base 47 px vs 64 px in the 80x80 patch, medians). Up to only
-    # 1.05: rendered apexes already sit 3 px below the patch top (5th percentile), and the
-    # production network's soft-argmax cannot reach above 1.5 px.
-    scale_range: tuple[float, float] = (0.7, 1.05)
-    shift_fraction: float = 0.06  # of the patch side, each axis
+    # Content scale: a box 1.5x to 0.8x the labelled one shows the cone 0.67x to 1.25x as large.
+    # Rendered apexes already sit 3 px below the patch top, so most draws above 1.05 are
+    # redrawn (the production network's soft-argmax cannot reach above 1.5 px).
+    scale_range: tuple[float, float] = (0.67, 1.25)
+    rotation_deg: float = 15.0
+    # Of the patch side, each axis: 0.4 of the side is 50 % of a box edge (the patch is 1.2x
+    # the box's longer side).
+    shift_fraction: float = 0.4
+    edge_px: float = 1.5
+    geometric_tries: int = 8
     p_geometric: float = 0.8
     p_mirror: float = 0.5
     p_truncate: float = 0.05
@@ -55,20 +63,23 @@ def _geometric(
     patch: np.ndarray, keypoints: np.ndarray, rng: np.random.Generator, p: AugmentParams
 ) -> tuple[np.ndarray, np.ndarray]:
     n = patch.shape[0]
-    scale = rng.uniform(*p.scale_range)
-    shift = rng.uniform(-p.shift_fraction, p.shift_fraction, size=2) * n
     centre = (n - 1) / 2.0
-    matrix = np.array(
-        [
-            [scale, 0.0, centre - scale * centre + shift[0]],
-            [0.0, scale, centre - scale * centre + shift[1]],
-        ]
-    )
-    out = cv2.warpAffine(
-        patch, matrix, (n, n), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT_101
-    )
-    moved = keypoints * scale + matrix[:, 2]
-    return out, moved
+    low, high = p.edge_px, n - 1 - p.edge_px
+    for _ in range(p.geometric_tries):
+        scale = rng.uniform(*p.scale_range)
+        shift = rng.uniform(-p.shift_fraction, p.shift_fraction, size=2) * n
+        angle = np.deg2rad(rng.uniform(-p.rotation_deg, p.rotation_deg))
+        linear = scale * np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+        offset = centre - linear @ np.array([centre, centre]) + shift
+        moved = keypoints @ linear.T + offset
+        if moved.min() < low or moved.max() > high:
+            continue
+        matrix = np.hstack([linear, offset[:, None]])
+        out = cv2.warpAffine(
+            patch, matrix, (n, n), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT_101
+        )
+        return out, moved
+    return patch, keypoints
 
 
 def _mirror(patch: np.ndarray, keypoints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -37,7 +37,15 @@ from conesight_train.inspect_data import rektnet_crops
 from conesight_train.keypoints import KEYPOINT_NAMES
 from conesight_train.metrics import KeypointErrors
 from conesight_train.preprocess import patch_to_input
-from conesight_train.train_keypoints import open_sources
+from conesight_train.train_keypoints import ConcatSources, open_real_source, open_sources
+
+# Reframings of real crops (issue 13): as another labeller or detector would frame the cone.
+# "shift_20pct" pools the four moves of 20 % of the box (left, right, up, down).
+REFRAMINGS: dict[str, list[tuple[float, float, float]]] = {
+    "shift_20pct": [(0.2, 0.0, 1.0), (-0.2, 0.0, 1.0), (0.0, 0.2, 1.0), (0.0, -0.2, 1.0)],
+    "scale_0.8x": [(0.0, 0.0, 0.8)],
+    "scale_1.3x": [(0.0, 0.0, 1.3)],
+}
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_REAL_CROPS = REPO_ROOT.parent / "shared" / "data" / "real-dev" / "fsoco-keypoint-crops"
@@ -73,13 +81,16 @@ def predictor_for(path: Path) -> Predictor:
 def evaluate(predict: Predictor, source: PatchSource, batch_size: int = 256) -> KeypointErrors:
     """Euclidean keypoint errors (and sigma, if predicted) of `predict` over `source`."""
     loader = DataLoader(KeypointDataset(source), batch_size=batch_size)
-    errors, sigmas = [], []
+    deltas, sigmas = [], []
     for images, keypoints in tqdm(loader, desc="evaluate", leave=False):
         predicted, sigma = predict(images.numpy())
-        errors.append(np.linalg.norm(predicted - keypoints.numpy(), axis=-1))
+        deltas.append(predicted - keypoints.numpy())
         if sigma is not None:
             sigmas.append(sigma)
-    return KeypointErrors(np.concatenate(errors), np.concatenate(sigmas) if sigmas else None)
+    delta = np.concatenate(deltas)
+    return KeypointErrors(
+        np.linalg.norm(delta, axis=-1), np.concatenate(sigmas) if sigmas else None, delta
+    )
 
 
 def plot_per_keypoint(results: dict[str, dict[str, KeypointErrors]], path: Path) -> None:
@@ -134,6 +145,7 @@ def format_table(title: str, results: dict[str, KeypointErrors]) -> str:
     for key, short in (
         ("sigma_error_rank_correlation", "sigma~error rho"),
         ("error_over_sigma_mean", "mean |e|/sigma"),
+        ("within_1_sigma_per_axis", "within 1 sigma"),
     ):
         cells = [summaries[label].get(key) for label in labels]
         if any(c is not None for c in cells):
@@ -150,6 +162,17 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--model", action="append", required=True, help="LABEL=PATH (.pt/.onnx)")
     parser.add_argument("--synthetic", action="append", default=[], help="held-out patches")
+    parser.add_argument(
+        "--data",
+        action="append",
+        default=[],
+        help="NAME=SPEC: any training data spec, e.g. real_val=real:DIR:val (see train_keypoints)",
+    )
+    parser.add_argument(
+        "--reframe",
+        action="store_true",
+        help="also evaluate each real --data set reframed (shift 20 %%, scale 0.8x and 1.3x)",
+    )
     parser.add_argument("--real-crops", type=Path, help="Supervisely keypoint crop folder")
     parser.add_argument("--no-real", action="store_true", help="skip the real crops")
     parser.add_argument(
@@ -183,6 +206,15 @@ def main(argv: list[str] | None = None) -> None:
     report: dict[str, object] = {}
     if args.synthetic:
         datasets["synthetic"] = open_sources(args.synthetic)
+    for spec in args.data:
+        name, sep, data_spec = spec.partition("=")
+        if not sep or not name or not data_spec:
+            parser.error(f"--data expects NAME=SPEC, got {spec!r}")
+        datasets[name] = open_sources([data_spec])
+        if args.reframe and data_spec.startswith("real:"):
+            for label, frames in REFRAMINGS.items():
+                parts = [open_real_source(data_spec, f) for f in frames]
+                datasets[f"{name}@{label}"] = parts[0] if len(parts) == 1 else ConcatSources(parts)
     real_dir = args.real_crops or DEFAULT_REAL_CROPS
     if not args.no_real and real_dir.is_dir():
         crop_set = read_keypoint_crops(real_dir)
@@ -210,7 +242,8 @@ def main(argv: list[str] | None = None) -> None:
         report[data_name] = {label: r.summary() for label, r in results.items()}
         all_results[data_name] = results
     if args.png:
-        plot_per_keypoint(all_results, args.png)
+        # Reframed sets stay in the tables; the chart shows the sets as framed.
+        plot_per_keypoint({k: v for k, v in all_results.items() if "@" not in k}, args.png)
     if args.examples_png:
         source = list(datasets.values())[-1]
         write_examples(next(iter(predictors.values())), source, args.examples, args.examples_png)

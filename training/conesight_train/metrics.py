@@ -22,10 +22,12 @@ def rank_correlation(a: np.ndarray, b: np.ndarray) -> float:
 @dataclass(frozen=True)
 class KeypointErrors:
     """Euclidean errors [M, 7] in patch pixels, with the summaries people read; `sigma_px`
-    [M, 7] is the network's own expected error where it predicts one."""
+    [M, 7] is the network's own error scale where it predicts one, `axis_errors_px` [M, 7, 2]
+    the signed (x, y) errors (predicted - labelled) where known."""
 
     errors_px: np.ndarray
     sigma_px: np.ndarray | None = None
+    axis_errors_px: np.ndarray | None = None
 
     @property
     def mean_px(self) -> float:
@@ -49,6 +51,15 @@ class KeypointErrors:
             result["sigma_mean_px"] = float(sigmas.mean())
             result["sigma_error_rank_correlation"] = rank_correlation(sigmas, errors)
             result["error_over_sigma_mean"] = float((errors / sigmas).mean())
+            if self.axis_errors_px is not None:
+                # Calibration of sigma as a per-axis standard deviation: 68.3 % expected.
+                ratios = np.abs(self.axis_errors_px) / self.sigma_px[..., None]
+                result["within_1_sigma_per_axis"] = float(np.mean(ratios <= 1.0))
+        if self.axis_errors_px is not None:
+            result["mean_signed_error_px"] = {
+                n: [float(v) for v in pair]
+                for n, pair in zip(KEYPOINT_NAMES, self.axis_errors_px.mean(0), strict=True)
+            }
         return result
 
 

@@ -2,7 +2,9 @@
 
 Settings come from `--config FILE.yaml` (the fields of `TrainConfig`; see `training/configs/`),
 overridden by flags. Data sources (`--train`, `--val`, repeatable): a renderer output folder holding
-`patches/index.jsonl`, or `toy:COUNT[:SEED]` for procedural cones (smoke runs and tests). Without
+`patches/index.jsonl`, real keypoint crops `real:DIR[:train|val|calib|all][*REPEAT]` (split
+by source frame, see `conesight_train.data.real_crops`), or `toy:COUNT[:SEED]` for procedural
+cones (smoke runs and tests). Without
 `--val`, a seeded `--val-fraction` of the training data is held out.
 
 Everything is seeded: the split, the batch order of each epoch (seed, epoch) and each sample's
@@ -32,7 +34,8 @@ from tqdm import tqdm
 
 from conesight_train.augment import PhotoAugment
 from conesight_train.checkpoint import load_checkpoint, save_checkpoint
-from conesight_train.data.patches import KeypointDataset, PatchSource, Subset
+from conesight_train.data.patches import KeypointDataset, PatchSource, RealCropPatches, Subset
+from conesight_train.data.real_crops import parse_real_spec, read_real_crops, split_crops
 from conesight_train.data.sim_patches import SimPatches
 from conesight_train.data.toy_cones import toy_cone_patches
 from conesight_train.losses import loss_for
@@ -97,8 +100,35 @@ class ConcatSources:
         return self.sources[which][index - int(self.offsets[which])]
 
 
+class Repeated:
+    """`source` `times` times over (each copy augmented on its own)."""
+
+    def __init__(self, source: PatchSource, times: int) -> None:
+        self.source, self.times = source, times
+
+    def __len__(self) -> int:
+        return len(self.source) * self.times
+
+    def __getitem__(self, index: int) -> Any:
+        return self.source[index % len(self.source)]
+
+
+def open_real_source(
+    spec: str, reframe: tuple[float, float, float] = (0.0, 0.0, 1.0)
+) -> PatchSource:
+    """A `real:DIR[:SPLIT][*N]` spec as patches, optionally reframed (see RealCropPatches)."""
+    root, which, repeat = parse_real_spec(spec)
+    crops = split_crops(read_real_crops(root), which)
+    if not crops:
+        raise ValueError(f"{spec}: no crops in the {which!r} split of {root}")
+    source: PatchSource = RealCropPatches(crops, reframe=reframe)
+    return Repeated(source, repeat) if repeat > 1 else source
+
+
 def open_source(spec: str) -> PatchSource:
-    """`toy:COUNT[:SEED]` or a renderer output folder (module docs)."""
+    """`toy:COUNT[:SEED]`, `real:DIR[:SPLIT][*N]` or a renderer output folder (module docs)."""
+    if spec.startswith("real:"):
+        return open_real_source(spec)
     if spec.startswith("toy:"):
         parts = spec.split(":")
         try:

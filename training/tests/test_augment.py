@@ -60,3 +60,35 @@ def test_augmentation_is_seeded_and_keeps_dtype():
     np.testing.assert_array_equal(a.patch_rgb, b.patch_rgb)
     assert a.patch_rgb.dtype == np.uint8 and a.patch_rgb.shape == (80, 80, 3)
     assert not np.array_equal(a.patch_rgb, c.patch_rgb)
+
+
+def test_paper_floor_rotates_and_keeps_every_keypoint_reachable():
+    # The default ranges (rotation +-15 deg, box 0.8-1.5x, shift up to half a box edge): the
+    # dots still follow, rotations really happen, and no keypoint leaves the band the
+    # soft-argmax can reach.
+    params = AugmentParams(
+        p_geometric=1.0,
+        p_mirror=0.0,
+        p_truncate=0.0,
+        p_neighbour=0.0,
+        p_colour=0.0,
+        p_gamma=0.0,
+        p_blur=0.0,
+        p_noise=0.0,
+        p_jpeg=0.0,
+    )
+    augment = PhotoAugment(params)
+    sample = dots_patch()
+    tilts = []
+    for seed in range(40):
+        out = augment(sample, np.random.default_rng(seed))
+        assert out.keypoints_px.min() >= params.edge_px
+        assert out.keypoints_px.max() <= 79 - params.edge_px
+        for i, (x, y) in enumerate(out.keypoints_px):
+            xi, yi = round(float(x)), round(float(y))
+            window = out.patch_rgb[yi - 1 : yi + 2, xi - 1 : xi + 2, 0].astype(int)
+            assert abs(window.max() - (100 + 20 * i)) < 25, (seed, i, window.max())
+        axis = out.keypoints_px[0] - (out.keypoints_px[3] + out.keypoints_px[6]) / 2
+        tilts.append(np.degrees(np.arctan2(axis[0], -axis[1])))
+    assert max(np.abs(tilts)) > 8.0  # rotations of the cone axis are drawn
+    assert max(np.abs(tilts)) <= 15.0 + 1.0

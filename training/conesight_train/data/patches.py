@@ -92,6 +92,10 @@ class RealCropPatches:
     it: `outside="replicate"` (default) extends the crop by repeating its border pixels
     before cutting (geometry unchanged), `outside="fill"` uses the rule's fill colour (black
     bands the networks never see in rendered patches).
+
+    `reframe = (dx, dy, scale)` moves the box by (dx, dy) times its (width, height) and scales
+    it by `scale` about its centre before cutting: the crop as another labeller or detector
+    would have framed it (keypoints follow, so errors stay comparable).
     """
 
     OUTSIDE_MODES = ("replicate", "fill")
@@ -101,19 +105,27 @@ class RealCropPatches:
         crops: Sequence[KeypointCrop],
         params: CropParams | None = None,
         outside: str = "replicate",
+        reframe: tuple[float, float, float] = (0.0, 0.0, 1.0),
     ) -> None:
+        if reframe[2] <= 0:
+            raise ValueError(f"reframe scale must be > 0, got {reframe[2]}")
+        self.reframe = reframe
         if outside not in self.OUTSIDE_MODES:
             raise ValueError(f"outside={outside!r}; expected one of {self.OUTSIDE_MODES}")
         self.crops = list(crops)
         self.params = params or CropParams()
         self.outside = outside
+        self._images: dict[int, np.ndarray] = {}  # decoded crops (small; a few MB in all)
 
     def __len__(self) -> int:
         return len(self.crops)
 
     def __getitem__(self, index: int) -> KeypointPatch:
         crop = self.crops[index]
-        image = read_rgb(crop.image_path)
+        image = self._images.get(index)
+        if image is None:
+            image = read_rgb(crop.image_path)
+            self._images[index] = image
         height, width = image.shape[:2]
         if (width, height) != (crop.width_px, crop.height_px):
             raise ValueError(
@@ -121,11 +133,18 @@ class RealCropPatches:
                 f"{crop.width_px}x{crop.height_px}"
             )
         pad = 0
+        dx, dy, scale = self.reframe
         if self.outside == "replicate":
             side = max(width, height) * (1.0 + 2.0 * self.params.margin_fraction)
-            pad = int(np.ceil(side / 2)) + 2
+            shift = max(abs(dx) * width, abs(dy) * height)
+            pad = int(np.ceil(side * max(1.0, scale) / 2 + shift)) + 2
             image = cv2.copyMakeBorder(image, pad, pad, pad, pad, cv2.BORDER_REPLICATE)
         bbox = PixelBox.from_pixel_range(pad, pad, pad + width - 1, pad + height - 1)
+        if self.reframe != (0.0, 0.0, 1.0):
+            cx = 0.5 * (bbox.x_min_px + bbox.x_max_px) + dx * bbox.width_px
+            cy = 0.5 * (bbox.y_min_px + bbox.y_max_px) + dy * bbox.height_px
+            half_w, half_h = 0.5 * scale * bbox.width_px, 0.5 * scale * bbox.height_px
+            bbox = PixelBox(cx - half_w, cy - half_h, cx + half_w, cy + half_h)
         patch, transform = crop_patch(image, bbox, self.params)
         keypoints = transform.patch_from_image(crop.keypoints_px + pad).astype(np.float32)
         return KeypointPatch(patch, keypoints)

@@ -5,8 +5,9 @@ and one more at 10x10 for context. Decoder: the 10x10 features are upsampled to 
 added to the 20x20 encoder features (1x1 projections), one 3x3 conv-BN-ReLU, then a 1x1 conv
 to 7 heatmaps at 20x20 (stride 4). Soft-argmax (integral regression: the softmax-weighted mean
 of the cell centres) gives sub-pixel keypoints; a small head on the pooled 10x10 features
-predicts each keypoint's expected error `sigma_px` (trained with a Laplace likelihood on the
-detached error, see `losses.py`), which the PnP can use as a weight 1 / sigma^2.
+predicts each keypoint's error scale `sigma_px` (trained with a Laplace likelihood on the
+detached error, see `losses.py`, then scaled by `sigma_scale` into a per-axis standard
+deviation, see `calibrate_sigma.py`), which the PnP uses as a weight 1 / sigma^2.
 """
 
 from __future__ import annotations
@@ -34,6 +35,9 @@ class HeatmapNetParams:
     stem_channels: int = 16
     stage_channels: tuple[int, int, int] = (32, 64, 64)
     decoder_channels: int = 32
+    # Factor on the sigma head's output, fitted after training on held-out crops so that the
+    # exported sigma_px is a calibrated per-axis standard deviation (`calibrate_sigma.py`).
+    sigma_scale: float = 1.0
 
 
 def soft_argmax(logits: torch.Tensor, stride_px: float) -> tuple[torch.Tensor, torch.Tensor]:
@@ -82,5 +86,5 @@ class HeatmapKeypointNet(nn.Module):
         fused = self.fuse(up + self.lateral(f20))
         keypoints_px, probs = soft_argmax(self.heads(fused), self.stride_px)
         pooled = torch.flatten(F.adaptive_avg_pool2d(f10, 1), 1)
-        sigma_px = F.softplus(self.sigma_head(pooled)) + SIGMA_FLOOR_PX
+        sigma_px = (F.softplus(self.sigma_head(pooled)) + SIGMA_FLOOR_PX) * self.params.sigma_scale
         return KeypointOutput(keypoints_px=keypoints_px, sigma_px=sigma_px, heatmaps=probs)

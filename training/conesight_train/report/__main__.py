@@ -32,12 +32,14 @@ from conesight_train.report.opencv_pnp import (
 from conesight_train.report.records import EvalRecords
 
 REPO_ROOT = Path(__file__).resolve().parents[3]
-RUST_VARIANTS = ("cone", "cone_ground", "generic", "generic_ransac")
+RUST_VARIANTS = ("cone", "cone_ground", "generic", "generic_ransac", "box_height", "cone_box")
 VARIANT_NAMES = {
     "cone": "cone (ours)",
     "cone_ground": "cone + ground plane (ours)",
     "generic": "generic EPnP + LM (ours)",
     "generic_ransac": "generic RANSAC (ours)",
+    "box_height": "box height alone (f_y H / h)",
+    "cone_box": "cone + box height (ours, the localiser)",
     "opencv_iterative": "OpenCV ITERATIVE",
     "opencv_sqpnp": "OpenCV SQPNP",
     "opencv_ransac": "OpenCV RANSAC",
@@ -108,15 +110,20 @@ def first_existing(spec: str) -> tuple[str, Path | None, list[str]]:
 
 
 def run_keypoint_eval(
-    models: dict[str, Path], patches: Path | None, real_crops: Path | None, out: Path, png: Path
+    models: dict[str, Path], patches: Path | None, real_crops: list[Path], out: Path, png: Path
 ) -> dict[str, Any]:
-    """`conesight_train.eval_keypoints` on the held-out patches and real crops."""
+    """`conesight_train.eval_keypoints` on the held-out patches and the validation split of
+    the real crops, as framed and reframed."""
     from conesight_train import eval_keypoints
 
     argv = [f"--model={label}={path}" for label, path in models.items()]
     if patches is not None:
         argv += ["--synthetic", str(patches)]
-    argv += ["--real-crops", str(real_crops)] if real_crops is not None else ["--no-real"]
+    argv += ["--no-real"]
+    for folder in real_crops:
+        argv += ["--data", f"real_val_{folder.name}=real:{folder}:val"]
+    if real_crops:
+        argv += ["--reframe"]
     argv += ["--json", str(out), "--png", str(png)]
     print("eval_keypoints", " ".join(argv), flush=True)
     eval_keypoints.main(argv)
@@ -328,7 +335,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--real-crops",
         type=Path,
-        default=REPO_ROOT.parent / "shared/data/real-dev/fsoco-keypoint-crops",
+        nargs="+",
+        default=[
+            REPO_ROOT.parent / "shared/data/real-dev/fsoco-keypoint-crops",
+            REPO_ROOT.parent / "shared/data/real-train/amz-keypoint-crops-hires",
+        ],
+        help="real keypoint crop folders; their validation split (by source frame) is used",
     )
     parser.add_argument(
         "--detector", type=Path, default=REPO_ROOT / "models/detector.onnx", help="for real frames"
@@ -371,18 +383,19 @@ def main(argv: list[str] | None = None) -> int:
             )
         else:
             kp_models[label] = path
-    real = args.real_crops if args.real_crops and args.real_crops.is_dir() else None
+    real_dirs = [d for d in args.real_crops if d.is_dir()]
+    real = real_dirs or None
     keypoints: dict[str, Any] = {
         "models": {k: str(v) for k, v in kp_models.items()},
         "sha256": {k: sha256(v) for k, v in kp_models.items()},
         "real_crops_note": (
-            f"{real.name} ({len(list((real / 'img').glob('*')))} crops)"
-            if real
+            "validation split by source frame of " + ", ".join(d.name for d in real_dirs)
+            if real_dirs
             else "absent (../shared not present)"
         ),
     }
     if real is None:
-        missing.append("real FSOCO crops (../shared/data/real-dev absent): no real keypoint errors")
+        missing.append("real keypoint crops (../shared/data absent): no real keypoint errors")
     patches = args.synthetic_patches
     if patches is not None and not (patches / "patches" / "index.jsonl").is_file():
         missing.append(f"held-out keypoint patches ({patches}): not rendered")
@@ -392,7 +405,7 @@ def main(argv: list[str] | None = None) -> int:
     elif kp_models:
         png = out_png / "keypoints.png"
         keypoints["eval_keypoints"] = run_keypoint_eval(
-            kp_models, patches, real, args.records / "keypoints.json", png
+            kp_models, patches, real_dirs, args.records / "keypoints.json", png
         )
         keypoints["png"] = "results/keypoints.png"
     keypoints["exact_boxes_in_frames"] = {}
