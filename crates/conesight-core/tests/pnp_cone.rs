@@ -132,10 +132,14 @@ fn zero_weight_drops_a_keypoint_and_weights_are_validated() {
             ..
         })
     ));
+    // Three usable keypoints (6 equations) fix the 3 unknowns of the position.
     observation.weights = [0.0, 1.0, 1.0, 0.0, 0.0, 0.0, 1.0];
+    let three = solve_cone(&camera, &model, &observation, &params).unwrap();
+    assert!((three.position_in_camera - truth).norm() < 1e-6);
+    observation.weights = [0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0];
     assert!(matches!(
         solve_cone(&camera, &model, &observation, &params),
-        Err(GeometryError::TooFewPoints { needed: 4, got: 3 })
+        Err(GeometryError::TooFewPoints { needed: 3, got: 2 })
     ));
     let mut nan = ConeObservation::new(silhouette_keypoints(&camera, &model, &pose).unwrap());
     nan.keypoints_px[2].x = f64::NAN;

@@ -13,6 +13,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use anyhow::Context as _;
+use conesight_core::pnp::ConeBox;
 use conesight_core::{Camera, ConeClass};
 use conesight_onnx::ModelOptions;
 use conesight_pipeline::keypoint_stage::DEFAULT_MAX_CONES_PER_FRAME;
@@ -322,7 +323,16 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Meta> {
                     .map(|k| k.map(|p| [p.x_px, p.y_px]));
                 let estimates = outcome
                     .as_ref()
-                    .map(|o| variants.solve_all(cone.class, &o.keypoints.observation))
+                    .map(|o| {
+                        let b = &cone.bbox;
+                        let cone_box = ConeBox {
+                            x_min_px: b.x_min_px,
+                            y_min_px: b.y_min_px,
+                            x_max_px: b.x_max_px,
+                            y_max_px: b.y_max_px,
+                        };
+                        variants.solve_all(cone.class, &o.keypoints.observation, &cone_box)
+                    })
                     .unwrap_or_default();
                 if *label == primary_label
                     && let Some(Some(p)) = estimates.get("cone").map(|e| e.position_m)

@@ -1,6 +1,13 @@
 //! [`LocaliserStage`]: cone keypoints -> [`LocatedCone`]s (cone PnP with covariance, in the
 //! camera and vehicle frames).
+//!
+//! The detector's box is a second, independent cue to the range: its height gives the depth
+//! (`conesight_core::pnp::box_depth`). By default it is fused into every PnP estimate as one
+//! more measurement of the depth, and a cone whose keypoints give no pose is placed from its
+//! box alone with the larger covariance that goes with it ([`Ranging`] says which). A box cut
+//! by the image's top or bottom edge gives no depth; such a cone needs its keypoints.
 
+use conesight_core::pnp::{ConeBox, Ranging, box_depth, box_estimate, fuse_box_depth};
 use conesight_core::{Camera, ConeModel, ConePnpParams, ConeSolver, Extrinsics, GeometryError};
 use conesight_proto::{ConeKeypoints, LocatedCone};
 
@@ -26,6 +33,7 @@ pub struct LocaliserStage {
     extrinsics: Extrinsics,
     small: ConeSolver,
     large: ConeSolver,
+    box_ranging: bool,
 }
 
 impl LocaliserStage {
@@ -43,7 +51,15 @@ impl LocaliserStage {
             extrinsics: *extrinsics,
             small: ConeSolver::new(camera, &ConeModel::small(), &params)?,
             large: ConeSolver::new(camera, &ConeModel::large(), &params)?,
+            box_ranging: true,
         })
+    }
+
+    /// With `false`, the box height is neither fused nor used as a fallback: keypoints alone
+    /// (for comparisons; the default is on).
+    pub fn with_box_ranging(mut self, on: bool) -> Self {
+        self.box_ranging = on;
+        self
     }
 
     /// The camera in use.
@@ -60,35 +76,61 @@ impl LocaliserStage {
     pub fn localise(&self, cones: &[ConeKeypoints]) -> LocaliserOutput {
         let mut output = LocaliserOutput::default();
         for (index, cone) in cones.iter().enumerate() {
-            let solver = if cone.detection.class.is_large() {
-                &self.large
+            let (solver, model) = if cone.detection.class.is_large() {
+                (&self.large, ConeModel::large())
             } else {
-                &self.small
+                (&self.small, ConeModel::small())
             };
-            match solver.solve(&cone.observation) {
-                Ok(estimate)
-                    if estimate
-                        .position_in_camera
-                        .coords
-                        .iter()
-                        .all(|v| v.is_finite())
-                        && estimate.covariance_m2.iter().all(|v| v.is_finite())
-                        && estimate.range_m() <= MAX_RANGE_M =>
-                {
-                    output.cones.push((
-                        index,
-                        LocatedCone::new(cone.detection, estimate, &self.extrinsics),
-                    ));
+            let b = &cone.detection.box_px;
+            let depth = self
+                .box_ranging
+                .then(|| {
+                    let cone_box = ConeBox {
+                        x_min_px: b.x_min_px,
+                        y_min_px: b.y_min_px,
+                        x_max_px: b.x_max_px,
+                        y_max_px: b.y_max_px,
+                    };
+                    box_depth(&self.camera, &model, &cone_box).ok()
+                })
+                .flatten();
+            let solved = solver.solve(&cone.observation);
+            let (estimate, ranging) = match (solved, depth) {
+                (Ok(estimate), Some(depth)) => {
+                    (fuse_box_depth(&estimate, &depth), Ranging::KeypointsAndBox)
                 }
-                Ok(estimate) => output.failed.push((
+                (Ok(estimate), None) => (estimate, Ranging::Keypoints),
+                (Err(_), Some(depth)) => (
+                    box_estimate(&depth, &solver.params().up_in_camera),
+                    Ranging::Box,
+                ),
+                (Err(error), None) => {
+                    output.failed.push((index, error));
+                    continue;
+                }
+            };
+            let valid = estimate
+                .position_in_camera
+                .coords
+                .iter()
+                .all(|v| v.is_finite())
+                && estimate.covariance_m2.iter().all(|v| v.is_finite())
+                && estimate.range_m() <= MAX_RANGE_M;
+            if valid {
+                output.cones.push((
+                    index,
+                    LocatedCone::new(cone.detection, estimate, &self.extrinsics)
+                        .with_ranging(ranging),
+                ));
+            } else {
+                output.failed.push((
                     index,
                     GeometryError::InvalidParameter {
                         name: "range_m",
                         value: estimate.range_m(),
                         expected: "a finite estimate within MAX_RANGE_M of the camera",
                     },
-                )),
-                Err(error) => output.failed.push((index, error)),
+                ));
             }
         }
         output

@@ -1,6 +1,7 @@
 //! Localised cones: [`LocatedCone`] (a PnP [`ConeEstimate`] in camera and vehicle frames) to and
 //! from `pb::Cone`.
 
+use conesight_core::pnp::Ranging;
 use conesight_core::{ConeEstimate, Extrinsics, KEYPOINT_COUNT};
 use nalgebra::{Matrix3, Point3, Vector3};
 
@@ -23,6 +24,8 @@ pub struct LocatedCone {
     pub position_in_vehicle: Point3<f64>,
     /// Covariance of `position_in_vehicle`, m^2.
     pub covariance_in_vehicle_m2: Matrix3<f64>,
+    /// How the position was found.
+    pub ranging: Ranging,
 }
 
 impl LocatedCone {
@@ -38,7 +41,14 @@ impl LocatedCone {
                 * estimate.covariance_m2
                 * rotation.matrix().transpose(),
             estimate,
+            ranging: Ranging::Keypoints,
         }
+    }
+
+    /// The same cone, saying how its position was found.
+    pub fn with_ranging(mut self, ranging: Ranging) -> Self {
+        self.ranging = ranging;
+        self
     }
 }
 
@@ -133,6 +143,12 @@ impl From<&LocatedCone> for pb::Cone {
             reprojection_rms_px: e.reprojection_rms_px,
             inlier_mask,
             iterations: u32::try_from(e.iterations).unwrap_or(u32::MAX),
+            ranging: match cone.ranging {
+                Ranging::Keypoints => pb::Ranging::Keypoints,
+                Ranging::KeypointsAndBox => pb::Ranging::KeypointsAndBox,
+                Ranging::Box => pb::Ranging::Box,
+            }
+            .into(),
         }
     }
 }
@@ -170,9 +186,21 @@ impl TryFrom<&pb::Cone> for LocatedCone {
             inliers: std::array::from_fn(|k| c.inlier_mask & (1 << k) != 0),
             iterations: c.iterations as usize,
         };
+        let ranging = match pb::Ranging::try_from(c.ranging) {
+            Ok(pb::Ranging::Unspecified | pb::Ranging::Keypoints) => Ranging::Keypoints,
+            Ok(pb::Ranging::KeypointsAndBox) => Ranging::KeypointsAndBox,
+            Ok(pb::Ranging::Box) => Ranging::Box,
+            Err(_) => {
+                return Err(ProtoError::UnknownEnum {
+                    field: "ranging".into(),
+                    value: c.ranging,
+                });
+            }
+        };
         Ok(Self {
             detection,
             estimate,
+            ranging,
             position_in_vehicle: Point3::from(vector_from_wire(
                 "position_in_vehicle_m",
                 c.position_in_vehicle_m.as_ref(),

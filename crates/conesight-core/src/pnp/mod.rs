@@ -9,6 +9,7 @@
 //! - The generic solver for any rigid point set ([`solve_pnp`], [`solve_pnp_ransac`]):
 //!   EPnP (`epnp.rs`) + Levenberg-Marquardt (`lm.rs`), in `generic.rs`; RANSAC in `ransac.rs`.
 
+mod box_range;
 mod cone;
 mod cone_gauss_newton;
 mod cone_init;
@@ -21,6 +22,9 @@ mod ransac;
 mod robust;
 mod silhouette_jacobian;
 
+pub use box_range::{
+    BOX_RANGE_RELATIVE_SIGMA, BoxDepth, ConeBox, Ranging, box_depth, box_estimate, fuse_box_depth,
+};
 pub use cone::{ConeSolver, predicted_keypoints, solve_cone};
 pub use epnp::epnp;
 pub use generic::{PnpSolution, solve_pnp};

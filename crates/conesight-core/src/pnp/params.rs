@@ -99,7 +99,7 @@ impl ConePnpParams {
             },
             outlier_threshold_px: OUTLIER_THRESHOLD_SIGMAS * sigma_px,
             max_iterations: 20,
-            min_inliers: 4,
+            min_inliers: 3,
             up_in_camera: Vector3::new(0.0, -1.0, 0.0),
             ground_plane: None,
             estimate_tilt: false,
