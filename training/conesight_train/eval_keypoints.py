@@ -37,6 +37,7 @@ from conesight_train.inspect_data import rektnet_crops
 from conesight_train.keypoints import KEYPOINT_NAMES
 from conesight_train.metrics import KeypointErrors
 from conesight_train.preprocess import patch_to_input
+from conesight_train.refine import evaluate_refined
 from conesight_train.train_keypoints import ConcatSources, open_real_source, open_sources
 
 # Reframings of real crops (issue 13): as another labeller or detector would frame the cone.
@@ -91,6 +92,17 @@ def evaluate(predict: Predictor, source: PatchSource, batch_size: int = 256) -> 
     return KeypointErrors(
         np.linalg.norm(delta, axis=-1), np.concatenate(sigmas) if sigmas else None, delta
     )
+
+
+def real_parts(source: PatchSource) -> list[RealCropPatches] | None:
+    """The real-crop sources that make up `source`, or None if it is not made of them."""
+    if isinstance(source, RealCropPatches):
+        return [source]
+    if isinstance(source, ConcatSources) and all(
+        isinstance(s, RealCropPatches) for s in source.sources
+    ):
+        return list(source.sources)
+    return None
 
 
 def plot_per_keypoint(results: dict[str, dict[str, KeypointErrors]], path: Path) -> None:
@@ -173,6 +185,12 @@ def main(argv: list[str] | None = None) -> None:
         action="store_true",
         help="also evaluate each real --data set reframed (shift 20 %%, scale 0.8x and 1.3x)",
     )
+    parser.add_argument(
+        "--refine",
+        type=int,
+        default=0,
+        help="re-framing rounds on real crops, as the keypoint stage does (see refine.py)",
+    )
     parser.add_argument("--real-crops", type=Path, help="Supervisely keypoint crop folder")
     parser.add_argument("--no-real", action="store_true", help="skip the real crops")
     parser.add_argument(
@@ -237,7 +255,13 @@ def main(argv: list[str] | None = None) -> None:
 
     all_results = {}
     for data_name, source in datasets.items():
-        results = {label: evaluate(p, source) for label, p in predictors.items()}
+        parts = real_parts(source)
+        if args.refine and parts:
+            results = {
+                label: evaluate_refined(p, parts, args.refine) for label, p in predictors.items()
+            }
+        else:
+            results = {label: evaluate(p, source) for label, p in predictors.items()}
         print(format_table(f"\n{data_name}", results))
         report[data_name] = {label: r.summary() for label, r in results.items()}
         all_results[data_name] = results
@@ -247,6 +271,7 @@ def main(argv: list[str] | None = None) -> None:
     if args.examples_png:
         source = list(datasets.values())[-1]
         write_examples(next(iter(predictors.values())), source, args.examples, args.examples_png)
+    report["refine_rounds"] = args.refine
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")

@@ -19,7 +19,7 @@ use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
 use conesight_vision::PixelBox;
-use nalgebra::{Point2, Point3};
+use nalgebra::{Matrix3, Point2, Point3};
 use serde::Serialize;
 
 use crate::config::EvalConfig;
@@ -43,9 +43,22 @@ pub struct Estimate {
     pub error: Option<String>,
     /// Wall time of the call, microseconds.
     pub micros: f64,
+    /// Covariance of `position_m`, m^2, row-major (solvers that give one).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub covariance_m2: Option<[f64; 9]>,
 }
 
 impl Estimate {
+    /// A found position with its covariance.
+    pub fn with_covariance(position: Point3<f64>, covariance: &Matrix3<f64>, micros: f64) -> Self {
+        let mut estimate = Self::found(position, micros);
+        if estimate.position_m.is_some() && covariance.iter().all(|v| v.is_finite()) {
+            let rows: [f64; 9] = std::array::from_fn(|i| covariance[(i / 3, i % 3)]);
+            estimate.covariance_m2 = Some(rows);
+        }
+        estimate
+    }
+
     /// A found position (non-finite positions count as failures).
     pub fn found(position: Point3<f64>, micros: f64) -> Self {
         if position.iter().all(|v| v.is_finite()) {
@@ -53,6 +66,7 @@ impl Estimate {
                 position_m: Some([position.x, position.y, position.z]),
                 error: None,
                 micros,
+                covariance_m2: None,
             }
         } else {
             Self::failed("non-finite position".to_owned(), micros)
@@ -65,6 +79,7 @@ impl Estimate {
             position_m: None,
             error: Some(error),
             micros,
+            covariance_m2: None,
         }
     }
 }

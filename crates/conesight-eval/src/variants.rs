@@ -105,22 +105,25 @@ impl Variants {
         out.insert(
             "box_height".to_owned(),
             match &depth {
-                Ok(d) => Estimate::found(box_estimate(d, &up).position_in_camera, box_micros),
+                Ok(d) => {
+                    let e = box_estimate(d, &up);
+                    Estimate::with_covariance(e.position_in_camera, &e.covariance_m2, box_micros)
+                }
                 Err(error) => Estimate::failed(error.to_string(), box_micros),
             },
         );
         let start = Instant::now();
         let fused = match (self.cone[size].solve(observation), &depth) {
-            (Ok(e), Ok(d)) => Ok(fuse_box_depth(&e, d).position_in_camera),
-            (Ok(e), Err(_)) => Ok(e.position_in_camera),
-            (Err(_), Ok(d)) => Ok(box_estimate(d, &up).position_in_camera),
+            (Ok(e), Ok(d)) => Ok(fuse_box_depth(&e, d)),
+            (Ok(e), Err(_)) => Ok(e),
+            (Err(_), Ok(d)) => Ok(box_estimate(d, &up)),
             (Err(error), Err(_)) => Err(error),
         };
         let micros = start.elapsed().as_secs_f64() * 1e6 + box_micros;
         out.insert(
             "cone_box".to_owned(),
             match fused {
-                Ok(p) => Estimate::found(p, micros),
+                Ok(e) => Estimate::with_covariance(e.position_in_camera, &e.covariance_m2, micros),
                 Err(error) => Estimate::failed(error.to_string(), micros),
             },
         );
@@ -134,7 +137,9 @@ impl Variants {
             out.insert(
                 name.to_owned(),
                 match result {
-                    Ok(e) => Estimate::found(e.position_in_camera, micros),
+                    Ok(e) => {
+                        Estimate::with_covariance(e.position_in_camera, &e.covariance_m2, micros)
+                    }
                     Err(error) => Estimate::failed(error.to_string(), micros),
                 },
             );

@@ -120,7 +120,8 @@ class RealCropPatches:
     def __len__(self) -> int:
         return len(self.crops)
 
-    def __getitem__(self, index: int) -> KeypointPatch:
+    def framed(self, index: int) -> tuple[np.ndarray, PixelBox, np.ndarray]:
+        """Crop `index` as (image with its outside filled, box as framed, keypoints in image px)."""
         crop = self.crops[index]
         image = self._images.get(index)
         if image is None:
@@ -145,8 +146,12 @@ class RealCropPatches:
             cy = 0.5 * (bbox.y_min_px + bbox.y_max_px) + dy * bbox.height_px
             half_w, half_h = 0.5 * scale * bbox.width_px, 0.5 * scale * bbox.height_px
             bbox = PixelBox(cx - half_w, cy - half_h, cx + half_w, cy + half_h)
+        return image, bbox, crop.keypoints_px + pad
+
+    def __getitem__(self, index: int) -> KeypointPatch:
+        image, bbox, keypoints_px = self.framed(index)
         patch, transform = crop_patch(image, bbox, self.params)
-        keypoints = transform.patch_from_image(crop.keypoints_px + pad).astype(np.float32)
+        keypoints = transform.patch_from_image(keypoints_px).astype(np.float32)
         return KeypointPatch(patch, keypoints)
 
 

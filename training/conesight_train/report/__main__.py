@@ -123,7 +123,8 @@ def run_keypoint_eval(
     for folder in real_crops:
         argv += ["--data", f"real_val_{folder.name}=real:{folder}:val"]
     if real_crops:
-        argv += ["--reframe"]
+        # Real crops go through the keypoint stage's re-framing, as deployed.
+        argv += ["--reframe", "--refine", "1"]
     argv += ["--json", str(out), "--png", str(png)]
     print("eval_keypoints", " ".join(argv), flush=True)
     eval_keypoints.main(argv)
@@ -421,6 +422,9 @@ def main(argv: list[str] | None = None) -> int:
     primary = records.gt_for(primary_label)
     add_opencv_estimates(primary, meta)
     variant_rows = metrics.variant_table(primary, (*RUST_VARIANTS, *OPENCV_VARIANTS), VARIANT_NAMES)
+    consistency = {
+        v: metrics.covariance_consistency(primary, v) for v in ("cone", "cone_box", "box_height")
+    }
 
     # 3. 3D accuracy.
     accuracy: dict[str, Any] = {
@@ -497,7 +501,11 @@ def main(argv: list[str] | None = None) -> int:
         "keypoints": keypoints,
         "accuracy_3d": accuracy,
         "perturbation": metrics.perturbation_summary(records.perturbation),
-        "pnp_variants": {"opencv_version": opencv_version(), "rows": variant_rows},
+        "pnp_variants": {
+            "opencv_version": opencv_version(),
+            "rows": variant_rows,
+            "covariance_consistency": consistency,
+        },
         "speed": metrics.timing_summary(
             [t for t in records_timing(args.records)], records.pipeline
         ),

@@ -41,6 +41,13 @@ def band_table(rows: Sequence[dict[str, Any]]) -> str:
     )
 
 
+VARIANT_LABELS = {
+    "cone": "cone (ours)",
+    "cone_box": "cone + box height (the localiser)",
+    "box_height": "box height alone",
+}
+
+
 def keypoint_section(kp: dict[str, Any]) -> list[str]:
     """Per data set: mean / median / p90 and per-keypoint means, one column per network."""
     out: list[str] = []
@@ -237,7 +244,10 @@ def render(results: dict[str, Any]) -> str:
         "on real AMZ crops: the real sets below are the validation part of the split by source "
         "frame (`real_val_*`, never trained on), and the same crops reframed as another "
         "labeller or detector would frame them (`@shift_20pct`: the box moved by 20 % left, "
-        "right, up, down; `@scale_0.8x`, `@scale_1.3x`: the box scaled about its centre). "
+        "right, up, down; `@scale_0.8x`, `@scale_1.3x`: the box scaled about its centre). Real "
+        "crops go through the keypoint stage's re-framing, as deployed: a cone whose first "
+        "prediction touches the patch border is re-cropped around its keypoints and predicted "
+        "again. "
         "Sigma calibration: the share of per-axis errors within the predicted sigma (68.3 % for "
         "a calibrated standard deviation). Files: "
         + (
@@ -386,6 +396,33 @@ def render(results: dict[str, Any]) -> str:
         "![PnP variants](results/pnp_variants.png)",
         "",
     ]
+    consistency = pnp.get("covariance_consistency") or {}
+    if consistency:
+        lines += [
+            "Is the covariance honest? Normalised estimation error squared (NEES, e^T C^-1 e "
+            "against the exact truth) of each cone's reported covariance: a calibrated "
+            "covariance gives a mean NEES equal to its degrees of freedom (3) and 95 % of the "
+            "cones within the chi-square 95 % quantile.",
+            "",
+            table(
+                ["solver", "band", "cones", "mean NEES", "median NEES", "within chi2 95 %"],
+                [
+                    [
+                        VARIANT_LABELS.get(variant, variant),
+                        row["band"],
+                        str(row["count"]),
+                        fmt(row["mean_nees"], 2),
+                        fmt(row["median_nees"], 2),
+                        fmt(100 * row["within_chi2_95"], 1) + " %"
+                        if row["within_chi2_95"] is not None
+                        else "-",
+                    ]
+                    for variant, rows in consistency.items()
+                    for row in rows
+                ],
+            ),
+            "",
+        ]
 
     lines += ["## 6. Speed on this machine", ""]
     speed = results["speed"]

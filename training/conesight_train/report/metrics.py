@@ -221,6 +221,50 @@ def variant_table(
     return rows
 
 
+# chi-square 95 % quantiles by degrees of freedom (2: on the ground plane, 3: free position).
+CHI2_95 = {1: 3.841, 2: 5.991, 3: 7.815}
+
+
+def covariance_consistency(records: Sequence[Record], variant: str) -> list[dict[str, Any]]:
+    """Per band: the normalised estimation error squared e^T C^+ e of `variant`'s positions
+    against the exact truth (C^+ the pseudo-inverse on C's rank, which is its degrees of
+    freedom). A calibrated covariance gives a mean NEES equal to the rank and 95 % of the cones
+    within the chi-square 95 % quantile."""
+    ranges, values, dofs = [], [], []
+    for r in records:
+        estimate = r["estimates"].get(variant) or {}
+        cov, pos = estimate.get("covariance_m2"), estimate.get("position_m")
+        if cov is None or pos is None:
+            continue
+        c = np.asarray(cov, np.float64).reshape(3, 3)
+        eigenvalues = np.linalg.eigvalsh(c)
+        rank = int((eigenvalues > 1e-12 * max(eigenvalues.max(), 1e-30)).sum())
+        if rank == 0:
+            continue
+        e = np.subtract(pos, r["position_true_m"])
+        ranges.append(r["range_m"])
+        values.append(float(e @ np.linalg.pinv(c, hermitian=True, rcond=1e-9) @ e))
+        dofs.append(rank)
+    ranges_a, values_a, dofs_a = np.array(ranges), np.array(values), np.array(dofs)
+    rows = []
+    for low, high in (*RANGE_BANDS_M, (RANGE_BANDS_M[0][0], RANGE_BANDS_M[-1][1])):
+        inside = (ranges_a >= low) & (ranges_a < high)
+        if not inside.any():
+            continue
+        limits = np.array([CHI2_95.get(int(d), np.nan) for d in dofs_a[inside]])
+        rows.append(
+            {
+                "band": f"{low:g}-{high:g} m",
+                "count": int(inside.sum()),
+                "dof": int(np.median(dofs_a[inside])),
+                "mean_nees": finite_or_none(values_a[inside].mean()),
+                "median_nees": finite_or_none(np.median(values_a[inside])),
+                "within_chi2_95": finite_or_none(np.mean(values_a[inside] <= limits)),
+            }
+        )
+    return rows
+
+
 def timing_summary(timing: Sequence[Record], pipeline: Sequence[Record]) -> dict[str, Any]:
     """Per-stage latency (p50 / p90 ms) and throughput. With a detector (`pipeline` records)
     the frame time is detector + keypoints + PnP; the keypoint throughput comes from the
