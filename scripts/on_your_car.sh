@@ -61,6 +61,44 @@ for c in placed:
 EOF
 done
 
+step "1b. the same calibration as OpenCV FileStorage and as a Kalibr camchain: the same cones"
+cat > "$WORK/cam-opencv.yml" <<'EOF'
+%YAML:1.0
+---
+image_width: 1920
+image_height: 1200
+camera_matrix: !!opencv-matrix
+   rows: 3
+   cols: 3
+   dt: d
+   data: [ 2047.7815699658704, 0., 960., 0., 2047.7815699658704, 600., 0., 0., 1. ]
+distortion_coefficients: !!opencv-matrix
+   rows: 1
+   cols: 5
+   dt: d
+   data: [ 0., 0., 0., 0., 0. ]
+EOF
+cat > "$WORK/camchain.yaml" <<'EOF'
+cam0:
+  camera_model: pinhole
+  distortion_coeffs: [0.0, 0.0, 0.0, 0.0]
+  distortion_model: radtan
+  intrinsics: [2047.7815699658704, 2047.7815699658704, 960.0, 600.0]
+  resolution: [1920, 1200]
+EOF
+conesight predict --camera "$WORK/cam.yaml" docs/sample/frame.jpg > "$WORK/ros.jsonl"
+for calibration in cam-opencv.yml camchain.yaml; do
+  conesight predict --camera "$WORK/$calibration" docs/sample/frame.jpg > "$WORK/other.jsonl"
+  python3 - "$WORK/ros.jsonl" "$WORK/other.jsonl" "$calibration" <<'EOF'
+import json, sys
+ros, other = (json.loads(open(p).readline())["cones"] for p in sys.argv[1:3])
+assert len(ros) == len(other) > 0, (len(ros), len(other))
+worst = max(abs(a["range_m"] - b["range_m"]) for a, b in zip(ros, other))
+print(f"{sys.argv[3]}: {len(other)} cones, ranges within {worst:.2e} m of the ROS file's")
+assert worst < 1e-6
+EOF
+done
+
 step "5. the split on loopback: camera + localiser services, detector + keypoints in conesight run"
 mkdir -p "$WORK/drive"
 cp docs/sample/frame.jpg "$WORK/drive/000000.jpg"

@@ -21,8 +21,10 @@ use serde_json::{Value, json};
 /// Arguments of `conesight predict`.
 #[derive(Debug, clap::Args)]
 pub struct PredictArgs {
-    /// ROS camera_info YAML of the camera that took the images (default: a pinhole camera of
-    /// each image's size with a 60-degree horizontal field of view; ranges are then a guess).
+    /// Calibration of the camera that took the images: ROS camera_info, OpenCV FileStorage or
+    /// Kalibr camchain YAML; plumb_bob, rational_polynomial or equidistant (fisheye) lenses
+    /// (default: a pinhole camera of each image's size with a 60-degree horizontal field of
+    /// view; ranges are then a guess).
     #[arg(long)]
     camera: Option<PathBuf>,
     /// Extrinsics YAML (`vehicle_from_camera`); default: the paper's mounting (1 m high,
@@ -65,7 +67,7 @@ pub struct PredictArgs {
 /// Runs `conesight predict`; fails (after processing every image) when any image failed.
 pub fn run(args: &PredictArgs) -> anyhow::Result<()> {
     let camera = match &args.camera {
-        Some(path) => Camera::from_ros_yaml_file(path)
+        Some(path) => Camera::from_calibration_file(path)
             .with_context(|| format!("camera calibration {}", path.display()))?,
         None => {
             eprintln!(

@@ -20,6 +20,7 @@ fn cameras() -> [(&'static str, Camera); 2] {
                 p1: 1.2e-3,
                 p2: -8e-4,
                 k3: -0.012,
+                ..Distortion::NONE
             }),
         ),
     ]

@@ -20,7 +20,7 @@ pub mod cone;
 pub mod error;
 pub mod pnp;
 
-pub use camera::{Camera, Distortion, Extrinsics};
+pub use camera::{Camera, Distortion, DistortionModel, Extrinsics};
 pub use cone::{
     CR3D, ConeClass, ConeModel, KEYPOINT_COUNT, Keypoint, cross_ratio, silhouette_keypoints,
 };

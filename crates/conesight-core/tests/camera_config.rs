@@ -116,7 +116,7 @@ fn malformed_camera_info_names_the_field() {
         ),
         (
             "distortion_model: plumb_bob",
-            "distortion_model: equidistant",
+            "distortion_model: kannala_brandt8",
             "distortion_model",
         ),
         (
@@ -162,18 +162,26 @@ fn malformed_camera_info_names_the_field() {
 
 #[test]
 fn unsupported_distortion_model_lists_the_supported_ones() {
-    let text = sample_camera_text().replace("plumb_bob", "equidistant");
+    let text = sample_camera_text().replace("plumb_bob", "kannala_brandt8");
     let message = Camera::from_ros_yaml_str(&text, "fisheye.yaml")
         .unwrap_err()
         .to_string();
     assert!(
-        message.contains("fisheye.yaml") && message.contains("equidistant"),
+        message.contains("fisheye.yaml")
+            && message.contains("kannala_brandt8")
+            && message.contains("equidistant"),
         "{message}"
     );
     assert!(
         message.contains("plumb_bob") && message.contains("none"),
         "{message}"
     );
+    // equidistant with plumb_bob's 5 coefficients: the count is the problem, said so.
+    let text = sample_camera_text().replace("plumb_bob", "equidistant");
+    let message = Camera::from_ros_yaml_str(&text, "fisheye.yaml")
+        .unwrap_err()
+        .to_string();
+    assert!(message.contains("equidistant takes 4"), "{message}");
 }
 
 #[test]

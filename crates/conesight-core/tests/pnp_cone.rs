@@ -23,6 +23,7 @@ fn distorted_camera() -> Camera {
         p1: 1.2e-3,
         p2: -8e-4,
         k3: -0.012,
+        ..Distortion::NONE
     })
 }
 

@@ -22,6 +22,7 @@ fn camera() -> Camera {
         p1: 5e-4,
         p2: -3e-4,
         k3: 0.0,
+        ..Distortion::NONE
     })
 }
 

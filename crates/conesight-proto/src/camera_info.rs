@@ -1,6 +1,6 @@
 //! Camera calibration: [`Camera`] and [`Extrinsics`] to and from `pb::CameraInfo`.
 
-use conesight_core::{Camera, Distortion, Extrinsics};
+use conesight_core::{Camera, Distortion, DistortionModel, Extrinsics};
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
 
 use crate::error::ProtoError;
@@ -16,6 +16,15 @@ impl From<&Distortion> for pb::Distortion {
             p1: d.p1,
             p2: d.p2,
             k3: d.k3,
+            k4: d.k4,
+            k5: d.k5,
+            k6: d.k6,
+            model: match d.model {
+                DistortionModel::PlumbBob => pb::DistortionModel::PlumbBob,
+                DistortionModel::RationalPolynomial => pb::DistortionModel::RationalPolynomial,
+                DistortionModel::Equidistant => pb::DistortionModel::Equidistant,
+            }
+            .into(),
         }
     }
 }
@@ -24,12 +33,27 @@ impl TryFrom<&pb::Distortion> for Distortion {
     type Error = ProtoError;
 
     fn try_from(d: &pb::Distortion) -> Result<Self, ProtoError> {
+        let model = match pb::DistortionModel::try_from(d.model) {
+            Ok(pb::DistortionModel::PlumbBob) => DistortionModel::PlumbBob,
+            Ok(pb::DistortionModel::RationalPolynomial) => DistortionModel::RationalPolynomial,
+            Ok(pb::DistortionModel::Equidistant) => DistortionModel::Equidistant,
+            Err(_) => {
+                return Err(ProtoError::UnknownEnum {
+                    field: "model".into(),
+                    value: d.model,
+                });
+            }
+        };
         Ok(Self {
             k1: finite("k1", d.k1)?,
             k2: finite("k2", d.k2)?,
             p1: finite("p1", d.p1)?,
             p2: finite("p2", d.p2)?,
             k3: finite("k3", d.k3)?,
+            k4: finite("k4", d.k4)?,
+            k5: finite("k5", d.k5)?,
+            k6: finite("k6", d.k6)?,
+            model,
         })
     }
 }
@@ -153,6 +177,7 @@ mod tests {
             p1: 1e-3,
             p2: -8e-4,
             k3: -0.01,
+            ..Distortion::NONE
         });
         let extrinsics = Extrinsics::from_height_pitch(1.1, 0.05);
         let info = pb::CameraInfo::new(

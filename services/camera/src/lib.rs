@@ -66,7 +66,8 @@ pub struct CameraArgs {
     /// default: the image folder.
     #[arg(long = "boxes-dir")]
     pub boxes_dir: Option<PathBuf>,
-    /// ROS camera_info YAML of the folder's camera (default: the paper's 1920x1200 camera).
+    /// Calibration of the folder's camera: ROS camera_info, OpenCV FileStorage or Kalibr
+    /// camchain YAML (default: the paper's 1920x1200 camera).
     #[arg(long = "camera-info", env = "CONESIGHT_CAMERA_INFO")]
     pub camera_info: Option<PathBuf>,
     /// Extrinsics YAML (`vehicle_from_camera`; default: the paper's mounting, 1 m high, level).
@@ -352,7 +353,7 @@ fn load_frames_blocking(args: &CameraArgs, progress: bool) -> anyhow::Result<Fra
                 .as_ref()
                 .context("--source folder needs --images DIR")?;
             let camera = match &args.camera_info {
-                Some(path) => Camera::from_ros_yaml_file(path)?,
+                Some(path) => Camera::from_calibration_file(path)?,
                 None => Camera::paper_default(),
             };
             let extrinsics = match &args.extrinsics {

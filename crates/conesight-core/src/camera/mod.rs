@@ -1,4 +1,6 @@
-//! The camera model: pinhole intrinsics plus OpenCV's `plumb_bob` distortion.
+//! The camera model: pinhole intrinsics plus lens distortion as OpenCV and ROS write it:
+//! `plumb_bob` (below), `rational_polynomial` and `equidistant` (fisheye, Kannala-Brandt), see
+//! [`DistortionModel`].
 //!
 //! [`Camera::project`] maps a point in the camera frame (OpenCV: x right, y down, z forward) to
 //! pixels; [`Camera::unproject`] maps a pixel back to the normalised ray (x/z, y/z) by Newton
@@ -12,28 +14,78 @@
 //! ```
 
 mod extrinsics;
+mod formats;
 mod ros;
 
 pub use extrinsics::Extrinsics;
+pub use formats::CalibrationFormat;
 
 use nalgebra::{Matrix2, Matrix2x3, Point2, Point3, Vector2, Vector3};
 use serde::{Deserialize, Serialize};
 
 use crate::error::GeometryError;
 
-/// OpenCV `plumb_bob` distortion coefficients (k1, k2, p1, p2, k3).
+/// The lens distortion models ROS and OpenCV write.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DistortionModel {
+    /// OpenCV's default, ROS `plumb_bob`: k1, k2, p1, p2, k3.
+    #[default]
+    PlumbBob,
+    /// ROS `rational_polynomial` (OpenCV `CALIB_RATIONAL_MODEL`): k1, k2, p1, p2, k3, k4, k5, k6;
+    /// radial factor `(1 + k1 r^2 + k2 r^4 + k3 r^6) / (1 + k4 r^2 + k5 r^4 + k6 r^6)`.
+    RationalPolynomial,
+    /// ROS `equidistant`, OpenCV `cv::fisheye` (Kannala-Brandt): k1, k2, k3, k4 on the angle
+    /// `theta = atan(r)`: `theta_d = theta (1 + k1 theta^2 + k2 theta^4 + k3 theta^6 + k4 theta^8)`.
+    Equidistant,
+}
+
+impl DistortionModel {
+    /// The name ROS `camera_info` uses.
+    pub fn ros_name(self) -> &'static str {
+        match self {
+            Self::PlumbBob => "plumb_bob",
+            Self::RationalPolynomial => "rational_polynomial",
+            Self::Equidistant => "equidistant",
+        }
+    }
+
+    /// Coefficients in the model's own order (module docs).
+    pub fn coefficient_count(self) -> usize {
+        match self {
+            Self::PlumbBob => 5,
+            Self::RationalPolynomial => 8,
+            Self::Equidistant => 4,
+        }
+    }
+}
+
+/// Lens distortion: the model and its coefficients (unused ones are 0). `plumb_bob` uses
+/// k1, k2, p1, p2, k3; `rational_polynomial` also k4, k5, k6; `equidistant` k1, k2, k3, k4.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct Distortion {
-    /// Radial r^2 coefficient.
+    /// Radial coefficient 1.
     pub k1: f64,
-    /// Radial r^4 coefficient.
+    /// Radial coefficient 2.
     pub k2: f64,
     /// Tangential coefficient p1.
     pub p1: f64,
     /// Tangential coefficient p2.
     pub p2: f64,
-    /// Radial r^6 coefficient.
+    /// Radial coefficient 3.
     pub k3: f64,
+    /// Radial coefficient 4 (rational denominator r^2, or equidistant theta^8).
+    #[serde(default)]
+    pub k4: f64,
+    /// Rational denominator r^4 coefficient.
+    #[serde(default)]
+    pub k5: f64,
+    /// Rational denominator r^6 coefficient.
+    #[serde(default)]
+    pub k6: f64,
+    /// Which model the coefficients belong to.
+    #[serde(default)]
+    pub model: DistortionModel,
 }
 
 impl Distortion {
@@ -44,14 +96,18 @@ impl Distortion {
         p1: 0.0,
         p2: 0.0,
         k3: 0.0,
+        k4: 0.0,
+        k5: 0.0,
+        k6: 0.0,
+        model: DistortionModel::PlumbBob,
     };
 
-    /// Coefficients in OpenCV's order `[k1, k2, p1, p2, k3]`.
+    /// `plumb_bob` coefficients in OpenCV's order `[k1, k2, p1, p2, k3]`.
     pub fn to_array(&self) -> [f64; 5] {
         [self.k1, self.k2, self.p1, self.p2, self.k3]
     }
 
-    /// From OpenCV's order `[k1, k2, p1, p2, k3]`.
+    /// `plumb_bob` from `[k1, k2, p1, p2, k3]`.
     pub fn from_array(d: [f64; 5]) -> Self {
         Self {
             k1: d[0],
@@ -59,35 +115,115 @@ impl Distortion {
             p1: d[2],
             p2: d[3],
             k3: d[4],
+            ..Self::NONE
         }
     }
 
-    /// True when every coefficient is zero.
-    pub fn is_none(&self) -> bool {
-        self.to_array().iter().all(|c| *c == 0.0)
+    /// `model` from its coefficients in the model's order (OpenCV's and ROS's):
+    /// `plumb_bob` 5 (or 4, k3 = 0), `rational_polynomial` 8, `equidistant` 4. `None` when the
+    /// count does not fit the model.
+    pub fn from_coefficients(model: DistortionModel, c: &[f64]) -> Option<Self> {
+        let at = |i: usize| c.get(i).copied().unwrap_or(0.0);
+        match (model, c.len()) {
+            (DistortionModel::PlumbBob, 4 | 5) => {
+                Some(Self::from_array([at(0), at(1), at(2), at(3), at(4)]))
+            }
+            (DistortionModel::RationalPolynomial, 8) => Some(Self {
+                k1: at(0),
+                k2: at(1),
+                p1: at(2),
+                p2: at(3),
+                k3: at(4),
+                k4: at(5),
+                k5: at(6),
+                k6: at(7),
+                model,
+            }),
+            (DistortionModel::Equidistant, 4) => Some(Self {
+                k1: at(0),
+                k2: at(1),
+                k3: at(2),
+                k4: at(3),
+                model,
+                ..Self::NONE
+            }),
+            _ => None,
+        }
     }
 
-    /// Distorts a normalised image point `(x/z, y/z)`.
+    /// The coefficients in the model's order (the inverse of [`Self::from_coefficients`]).
+    pub fn coefficients(&self) -> Vec<f64> {
+        match self.model {
+            DistortionModel::PlumbBob => self.to_array().to_vec(),
+            DistortionModel::RationalPolynomial => vec![
+                self.k1, self.k2, self.p1, self.p2, self.k3, self.k4, self.k5, self.k6,
+            ],
+            DistortionModel::Equidistant => vec![self.k1, self.k2, self.k3, self.k4],
+        }
+    }
+
+    /// True when projecting through it changes nothing (every coefficient zero; an equidistant
+    /// lens with zero coefficients still maps r to atan(r), so it is never "none").
+    pub fn is_none(&self) -> bool {
+        self.model != DistortionModel::Equidistant
+            && [
+                self.k1, self.k2, self.p1, self.p2, self.k3, self.k4, self.k5, self.k6,
+            ]
+            .iter()
+            .all(|c| *c == 0.0)
+    }
+
+    /// Applies the distortion to normalised coordinates (x/z, y/z).
     pub fn distort(&self, undistorted: &Vector2<f64>) -> Vector2<f64> {
-        let (x, y) = (undistorted.x, undistorted.y);
-        let r2 = x * x + y * y;
-        let radial = 1.0 + r2 * (self.k1 + r2 * (self.k2 + r2 * self.k3));
-        Vector2::new(
-            x * radial + 2.0 * self.p1 * x * y + self.p2 * (r2 + 2.0 * x * x),
-            y * radial + self.p1 * (r2 + 2.0 * y * y) + 2.0 * self.p2 * x * y,
+        self.distort_with_jacobian(undistorted).0
+    }
+
+    /// Radial factor and its derivative with respect to r^2 (plumb_bob and rational).
+    fn radial(&self, r2: f64) -> (f64, f64) {
+        let num = 1.0 + r2 * (self.k1 + r2 * (self.k2 + r2 * self.k3));
+        let d_num = self.k1 + r2 * (2.0 * self.k2 + 3.0 * self.k3 * r2);
+        if self.model != DistortionModel::RationalPolynomial {
+            return (num, d_num);
+        }
+        let den = 1.0 + r2 * (self.k4 + r2 * (self.k5 + r2 * self.k6));
+        let d_den = self.k4 + r2 * (2.0 * self.k5 + 3.0 * self.k6 * r2);
+        (num / den, (d_num * den - num * d_den) / (den * den))
+    }
+
+    /// The equidistant (fisheye) mapping and its Jacobian.
+    fn equidistant_with_jacobian(&self, p: &Vector2<f64>) -> (Vector2<f64>, Matrix2<f64>) {
+        let r2 = p.norm_squared();
+        let (k1, k2, k3, k4) = (self.k1, self.k2, self.k3, self.k4);
+        if r2 < 1e-24 {
+            return (*p, Matrix2::identity());
+        }
+        let r = r2.sqrt();
+        let theta = r.atan();
+        let t2 = theta * theta;
+        let poly = 1.0 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4)));
+        let theta_d = theta * poly;
+        let d_theta_d = 1.0 + t2 * (3.0 * k1 + t2 * (5.0 * k2 + t2 * (7.0 * k3 + t2 * 9.0 * k4)));
+        let scale = theta_d / r;
+        // d(scale)/dr = (theta_d'(theta) theta'(r) r - theta_d) / r^2, theta'(r) = 1 / (1 + r^2)
+        let d_scale = (d_theta_d / (1.0 + r2) * r - theta_d) / r2;
+        let outer = p * p.transpose();
+        (
+            p * scale,
+            Matrix2::identity() * scale + outer * (d_scale / r),
         )
     }
 
-    /// Distorts a normalised point and returns the 2x2 Jacobian d(distorted)/d(undistorted).
+    /// [`Self::distort`] and its 2x2 Jacobian with respect to the undistorted coordinates.
     pub fn distort_with_jacobian(
         &self,
         undistorted: &Vector2<f64>,
     ) -> (Vector2<f64>, Matrix2<f64>) {
+        if self.model == DistortionModel::Equidistant {
+            return self.equidistant_with_jacobian(undistorted);
+        }
         let (x, y) = (undistorted.x, undistorted.y);
         let r2 = x * x + y * y;
-        let radial = 1.0 + r2 * (self.k1 + r2 * (self.k2 + r2 * self.k3));
-        // d(radial)/d(r2)
-        let d_radial = self.k1 + r2 * (2.0 * self.k2 + 3.0 * self.k3 * r2);
+        let (radial, d_radial) = self.radial(r2);
         let (dr_dx, dr_dy) = (2.0 * x * d_radial, 2.0 * y * d_radial);
         let distorted = Vector2::new(
             x * radial + 2.0 * self.p1 * x * y + self.p2 * (r2 + 2.0 * x * x),
@@ -301,7 +437,30 @@ mod tests {
             p1: 1.2e-3,
             p2: -8e-4,
             k3: -0.012,
+            ..Distortion::NONE
         })
+    }
+
+    /// A rational-model lens (coefficients of the order OpenCV's CALIB_RATIONAL_MODEL gives).
+    fn rational_camera() -> Camera {
+        Camera::pinhole(1920, 1200, 1000.0).with_distortion(
+            Distortion::from_coefficients(
+                DistortionModel::RationalPolynomial,
+                &[0.4, 0.05, 6e-4, -3e-4, 0.0, 0.6, 0.1, 0.0],
+            )
+            .expect("8 coefficients"),
+        )
+    }
+
+    /// A fisheye (equidistant) lens with a 160-degree diagonal field of view.
+    fn fisheye_camera() -> Camera {
+        Camera::pinhole(1920, 1200, 800.0).with_distortion(
+            Distortion::from_coefficients(
+                DistortionModel::Equidistant,
+                &[-0.02, 0.004, -0.003, 0.0005],
+            )
+            .expect("4 coefficients"),
+        )
     }
 
     #[test]
@@ -323,7 +482,10 @@ mod tests {
                 p1: 4e-4,
                 p2: 2e-4,
                 k3: -0.002,
+                ..Distortion::NONE
             }),
+            rational_camera(),
+            fisheye_camera(),
         ] {
             let mut worst = 0.0_f64;
             for v in (0..=1200).step_by(20) {
@@ -340,8 +502,18 @@ mod tests {
 
     #[test]
     fn jacobian_matches_finite_differences() {
-        let camera = distorted_camera();
-        let point = Point3::new(1.3, -0.4, 6.0);
+        for (camera, point) in [
+            (distorted_camera(), Point3::new(1.3, -0.4, 6.0)),
+            (rational_camera(), Point3::new(4.0, -1.9, 6.0)),
+            (fisheye_camera(), Point3::new(9.0, -3.0, 4.0)),
+            (fisheye_camera(), Point3::new(1e-7, 0.0, 4.0)),
+        ] {
+            check_jacobian(&camera, &point);
+        }
+    }
+
+    fn check_jacobian(camera: &Camera, point: &Point3<f64>) {
+        let point = *point;
         let (_, jacobian) = camera.project_with_jacobian(&point).expect("in front");
         let h = 1e-6;
         for axis in 0..3 {
@@ -355,6 +527,29 @@ mod tests {
             assert_relative_eq!(jacobian[(0, axis)], numeric.x, epsilon = 1e-4);
             assert_relative_eq!(jacobian[(1, axis)], numeric.y, epsilon = 1e-4);
         }
+    }
+
+    #[test]
+    fn model_coefficients_round_trip_and_wrong_counts_are_refused() {
+        for (model, count) in [
+            (DistortionModel::PlumbBob, 5_u32),
+            (DistortionModel::RationalPolynomial, 8),
+            (DistortionModel::Equidistant, 4),
+        ] {
+            let c: Vec<f64> = (0..count).map(|i| 0.01 * f64::from(i + 1)).collect();
+            let count = c.len();
+            let d = Distortion::from_coefficients(model, &c).expect("right count");
+            assert_eq!(d.coefficients(), c);
+            assert_eq!(d.model, model);
+            assert!(Distortion::from_coefficients(model, &c[..count - 2]).is_none());
+        }
+        // An equidistant lens without coefficients still bends rays (theta = atan r).
+        let bare = Distortion::from_coefficients(DistortionModel::Equidistant, &[0.0; 4]).unwrap();
+        assert!(!bare.is_none());
+        assert_relative_eq!(
+            bare.distort(&Vector2::new(1.0, 0.0)).x,
+            std::f64::consts::FRAC_PI_4
+        );
     }
 
     #[test]

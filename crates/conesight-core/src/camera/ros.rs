@@ -13,8 +13,9 @@
 //! ```
 //!
 //! Supported distortion models: `plumb_bob` (5 coefficients, or 4 with k3 = 0),
-//! `rational_polynomial` (8 coefficients, accepted only when k4..k6 are zero, since the camera
-//! model is `plumb_bob`) and `none`. The rectification and projection matrices are optional and
+//! `rational_polynomial` (8: k1, k2, p1, p2, k3, k4, k5, k6), `equidistant` (4: k1..k4, the
+//! fisheye model of ROS and OpenCV's `cv::fisheye`; `fisheye` is accepted as its alias) and
+//! `none`. The rectification and projection matrices are optional and
 //! only checked for shape (a monocular camera ignores them).
 //!
 //! The YAML helpers here are shared with the extrinsics loader.
@@ -23,12 +24,13 @@ use std::path::Path;
 
 use serde_yaml::{Mapping, Value};
 
-use super::{Camera, Distortion};
+use super::{Camera, Distortion, DistortionModel};
 use crate::error::ConfigError;
 
 /// What a camera_info file should look like, for YAML syntax errors.
 const CAMERA_INFO_HINT: &str = "a ROS camera_info YAML mapping with image_width, image_height, \
-     camera_matrix {rows: 3, cols: 3, data: [9 numbers]}, distortion_model (plumb_bob) and \
+     camera_matrix {rows: 3, cols: 3, data: [9 numbers]}, distortion_model (plumb_bob, \
+     rational_polynomial or equidistant) and \
      distortion_coefficients {rows: 1, cols: 5, data: [k1, k2, p1, p2, k3]}";
 
 /// Tolerance on the fixed entries of the camera matrix (skew, bottom row).
@@ -197,7 +199,8 @@ const DISTORTION: MatrixFields = MatrixFields {
     cols: "distortion_coefficients.cols",
     data: "distortion_coefficients.data",
     expected: "{rows: 1, cols: 5, data: [k1, k2, p1, p2, k3]} for plumb_bob (4 coefficients mean \
-               k3 = 0; rational_polynomial's 8 only with k4 = k5 = k6 = 0)",
+               k3 = 0), 8 [k1, k2, p1, p2, k3, k4, k5, k6] for rational_polynomial, 4 [k1, k2, \
+               k3, k4] for equidistant",
 };
 const RECTIFICATION: MatrixFields = MatrixFields {
     key: "rectification_matrix",
@@ -271,7 +274,7 @@ fn matrix(
 
 /// The distortion from `distortion_model` and `distortion_coefficients`.
 fn distortion(mapping: &Mapping, what: &str) -> Result<Distortion, ConfigError> {
-    const MODEL_EXPECTED: &str = "plumb_bob, rational_polynomial (with k4 = k5 = k6 = 0) or none";
+    const MODEL_EXPECTED: &str = "plumb_bob, rational_polynomial, equidistant or none";
     let model_value = required(
         mapping,
         "distortion_model",
@@ -299,8 +302,10 @@ fn distortion(mapping: &Mapping, what: &str) -> Result<Distortion, ConfigError> 
             DISTORTION.expected,
         ));
     };
-    match model {
-        "plumb_bob" | "rational_polynomial" => {}
+    let model = match model {
+        "plumb_bob" => DistortionModel::PlumbBob,
+        "rational_polynomial" => DistortionModel::RationalPolynomial,
+        "equidistant" | "fisheye" => DistortionModel::Equidistant,
         "none" if coefficients.iter().all(|c| *c == 0.0) => return Ok(Distortion::NONE),
         "none" => {
             return Err(field_error(
@@ -318,35 +323,39 @@ fn distortion(mapping: &Mapping, what: &str) -> Result<Distortion, ConfigError> 
                 MODEL_EXPECTED,
             ));
         }
-    }
-    let mut five = [0.0; 5];
-    match coefficients.len() {
-        4 | 5 => five[..coefficients.len()].copy_from_slice(&coefficients),
-        8 if coefficients[5..].iter().all(|c| *c == 0.0) => {
-            five.copy_from_slice(&coefficients[..5]);
+    };
+    // A rational model whose denominator is 1 is plumb_bob (ROS writes 8 coefficients for
+    // plumb_bob cameras calibrated with the rational flag off).
+    let model = match (model, coefficients.len()) {
+        (DistortionModel::PlumbBob, 8) if coefficients[5..].iter().all(|c| *c == 0.0) => {
+            return Ok(Distortion::from_array([
+                coefficients[0],
+                coefficients[1],
+                coefficients[2],
+                coefficients[3],
+                coefficients[4],
+            ]));
         }
-        8 => {
-            return Err(field_error(
-                what,
-                DISTORTION.data,
-                format!(
-                    "has rational coefficients k4, k5, k6 = {:?}, which the plumb_bob camera \
-                     model cannot represent",
-                    &coefficients[5..]
-                ),
-                DISTORTION.expected,
-            ));
-        }
-        n => {
-            return Err(field_error(
-                what,
-                DISTORTION.data,
-                format!("has {n} coefficients"),
-                DISTORTION.expected,
-            ));
-        }
-    }
-    Ok(Distortion::from_array(five))
+        (DistortionModel::RationalPolynomial, 5) => DistortionModel::PlumbBob,
+        (model, _) => model,
+    };
+    Distortion::from_coefficients(model, &coefficients).ok_or_else(|| {
+        field_error(
+            what,
+            DISTORTION.data,
+            format!(
+                "has {} coefficients, {} takes {}",
+                coefficients.len(),
+                model.ros_name(),
+                match model {
+                    DistortionModel::PlumbBob => "5 (k1, k2, p1, p2, k3) or 4",
+                    DistortionModel::RationalPolynomial => "8 (k1, k2, p1, p2, k3, k4, k5, k6)",
+                    DistortionModel::Equidistant => "4 (k1, k2, k3, k4)",
+                }
+            ),
+            DISTORTION.expected,
+        )
+    })
 }
 
 impl Camera {
@@ -449,7 +458,7 @@ impl Camera {
     }
 
     /// This camera as ROS `camera_info` YAML named `camera_name`, in `camera_calibration`'s
-    /// layout: `plumb_bob`, identity rectification, projection `[K | 0]`.
+    /// layout: the camera's distortion model and coefficients, identity rectification, projection `[K | 0]`.
     /// [`Self::from_ros_yaml_str`] reads it back exactly (numbers are written in Rust's
     /// shortest round-trip form).
     pub fn to_ros_yaml(&self, camera_name: &str) -> String {
@@ -465,15 +474,17 @@ impl Camera {
         format!(
             "image_width: {}\nimage_height: {}\ncamera_name: {}\
              camera_matrix:\n  rows: 3\n  cols: 3\n  data: [{}]\n\
-             distortion_model: plumb_bob\n\
-             distortion_coefficients:\n  rows: 1\n  cols: 5\n  data: [{}]\n\
+             distortion_model: {}\n\
+             distortion_coefficients:\n  rows: 1\n  cols: {}\n  data: [{}]\n\
              rectification_matrix:\n  rows: 3\n  cols: 3\n  data: [{}]\n\
              projection_matrix:\n  rows: 3\n  cols: 4\n  data: [{}]\n",
             self.width_px,
             self.height_px,
             name,
             list(&[fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0]),
-            list(&self.distortion.to_array()),
+            self.distortion.model.ros_name(),
+            self.distortion.coefficients().len(),
+            list(&self.distortion.coefficients()),
             list(&[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]),
             list(&[fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0]),
         )
