@@ -1,5 +1,7 @@
 """Augmentation keeps keypoints on the image content they label."""
 
+from dataclasses import replace
+
 import numpy as np
 
 from conesight_train.augment import AugmentParams, PhotoAugment
@@ -66,16 +68,12 @@ def test_paper_floor_rotates_and_keeps_every_keypoint_reachable():
     # The default ranges (rotation +-15 deg, box 0.8-1.5x, shift up to half a box edge): the
     # dots still follow, rotations really happen, and no keypoint leaves the band the
     # soft-argmax can reach.
-    params = AugmentParams(
-        p_geometric=1.0,
+    defaults = AugmentParams()
+    params = replace(
+        GEOMETRY_ONLY,
         p_mirror=0.0,
-        p_truncate=0.0,
-        p_neighbour=0.0,
-        p_colour=0.0,
-        p_gamma=0.0,
-        p_blur=0.0,
-        p_noise=0.0,
-        p_jpeg=0.0,
+        scale_range=defaults.scale_range,
+        shift_fraction=defaults.shift_fraction,
     )
     augment = PhotoAugment(params)
     sample = dots_patch()
