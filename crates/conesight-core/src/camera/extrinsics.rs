@@ -24,7 +24,7 @@ use nalgebra::{Isometry3, Quaternion, Rotation3, Translation3, UnitQuaternion, V
 use serde::{Deserialize, Serialize};
 use serde_yaml::{Mapping, Value};
 
-use super::ros::{field_error, number, numbers, parse_mapping, required};
+use super::ros::{field_error, number, numbers, parse_mapping, read_text, required};
 use crate::error::ConfigError;
 
 /// What an extrinsics file should look like, for YAML syntax errors.
@@ -173,10 +173,7 @@ impl Extrinsics {
     /// Reads an extrinsics YAML file, see [`Self::from_yaml_str`].
     pub fn from_yaml_file(path: impl AsRef<Path>) -> Result<Self, ConfigError> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
-            path: path.to_owned(),
-            source,
-        })?;
+        let text = read_text(path)?;
         Self::from_yaml_str(&text, &path.display().to_string())
     }
 

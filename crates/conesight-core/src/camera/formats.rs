@@ -16,7 +16,7 @@ use std::path::Path;
 
 use serde_yaml::{Mapping, Value};
 
-use super::ros::{field_error, parse_mapping};
+use super::ros::{field_error, parse_mapping, read_text};
 use super::{Camera, Distortion, DistortionModel};
 use crate::error::ConfigError;
 
@@ -66,6 +66,15 @@ fn plain_yaml(text: &str) -> String {
         .join("\n")
 }
 
+/// A mapping back to YAML text, for the ROS reader.
+fn to_yaml(mapping: &Mapping, what: &str, hint: &'static str) -> Result<String, ConfigError> {
+    serde_yaml::to_string(mapping).map_err(|error| ConfigError::Yaml {
+        what: what.to_owned(),
+        message: error.to_string(),
+        hint,
+    })
+}
+
 impl Camera {
     /// Reads an OpenCV FileStorage calibration (module docs).
     pub fn from_opencv_yaml_str(text: &str, what: &str) -> Result<Self, ConfigError> {
@@ -84,12 +93,7 @@ impl Camera {
             };
             mapping.insert("distortion_model".into(), model.into());
         }
-        let text = serde_yaml::to_string(&mapping).map_err(|error| ConfigError::Yaml {
-            what: what.to_owned(),
-            message: error.to_string(),
-            hint: OPENCV_HINT,
-        })?;
-        Self::from_ros_yaml_str(&text, what)
+        Self::from_ros_yaml_str(&to_yaml(&mapping, what, OPENCV_HINT)?, what)
     }
 
     /// Reads camera `camera` (e.g. `cam0`; `None` = `cam0`) of a Kalibr camchain (module docs).
@@ -210,22 +214,14 @@ impl Camera {
                 coefficients,
             ),
         );
-        let text = serde_yaml::to_string(&ros).map_err(|error| ConfigError::Yaml {
-            what: what.to_owned(),
-            message: error.to_string(),
-            hint: KALIBR_HINT,
-        })?;
-        Self::from_ros_yaml_str(&text, what)
+        Self::from_ros_yaml_str(&to_yaml(&ros, what, KALIBR_HINT)?, what)
     }
 
     /// Reads a calibration file in any format conesight knows (ROS camera_info, OpenCV
     /// FileStorage, Kalibr camchain's `cam0`), told apart by content.
     pub fn from_calibration_file(path: impl AsRef<Path>) -> Result<Self, ConfigError> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
-            path: path.to_owned(),
-            source,
-        })?;
+        let text = read_text(path)?;
         let what = path.display().to_string();
         match CalibrationFormat::detect(&text) {
             CalibrationFormat::Ros => Self::from_ros_yaml_str(&text, &what),

@@ -85,6 +85,14 @@ pub(super) fn field_error(
     }
 }
 
+/// A config file's text; an I/O error names the file.
+pub(super) fn read_text(path: &Path) -> Result<String, ConfigError> {
+    std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
+        path: path.to_owned(),
+        source,
+    })
+}
+
 /// The value under `key`, or a "missing" error naming `field`.
 pub(super) fn required<'a>(
     mapping: &'a Mapping,
@@ -450,10 +458,7 @@ impl Camera {
     /// Reads a ROS `camera_info` YAML file, see [`Self::from_ros_yaml_str`].
     pub fn from_ros_yaml_file(path: impl AsRef<Path>) -> Result<Self, ConfigError> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
-            path: path.to_owned(),
-            source,
-        })?;
+        let text = read_text(path)?;
         Self::from_ros_yaml_str(&text, &path.display().to_string())
     }
 
