@@ -92,7 +92,12 @@ done
 strip --strip-debug "$ctx"/bin/* 2>/dev/null || true
 cp "$ORT_LIB" "$ctx/onnxruntime/"
 shopt -s nullglob
-cp models/*.onnx models/*.card.json models/*.md "$ctx/models/"
+# Only the models the services run (and their cards): the paper baseline and the ablation
+# (20 MB) are for `make eval`, not for a car.
+for model in detector keypoints; do
+    cp "models/$model.onnx" "models/$model.card.json" "models/$model.md" "$ctx/models/"
+done
+cp models/README.md "$ctx/models/"
 cp deploy/zenoh/*.json5 "$ctx/zenoh/"
 shopt -u nullglob
 

@@ -48,27 +48,26 @@ impl YoloClasses {
     fn parse(text: &str, path: &Path) -> Result<Self, String> {
         let hint =
             "expected `names: [blue_cone, yellow_cone, ...]` or `names: {0: blue_cone, ...}`";
-        let yaml: serde_yaml::Value =
-            serde_yaml::from_str(text).map_err(|e| format!("not YAML ({e}); {hint}"))?;
-        let names: Vec<String> = match yaml.get("names") {
-            Some(serde_yaml::Value::Sequence(items)) => items
-                .iter()
-                .map(|v| v.as_str().map(str::to_owned))
-                .collect::<Option<_>>()
-                .ok_or_else(|| format!("a name is not a string; {hint}"))?,
-            Some(serde_yaml::Value::Mapping(map)) => {
-                let mut pairs = map
-                    .iter()
-                    .map(|(k, v)| Some((k.as_u64()?, v.as_str()?.to_owned())))
-                    .collect::<Option<Vec<_>>>()
-                    .ok_or_else(|| format!("names must map ids to strings; {hint}"))?;
-                pairs.sort();
-                if pairs.iter().enumerate().any(|(i, (id, _))| *id != i as u64) {
+        /// Ultralytics' `data.yaml`: `names` as a list or as an id -> name mapping.
+        #[derive(serde::Deserialize)]
+        struct DataYaml {
+            names: Names,
+        }
+        #[derive(serde::Deserialize)]
+        #[serde(untagged)]
+        enum Names {
+            List(Vec<String>),
+            Map(std::collections::BTreeMap<u64, String>),
+        }
+        let yaml: DataYaml = serde_yaml_ng::from_str(text).map_err(|e| format!("{e}; {hint}"))?;
+        let names: Vec<String> = match yaml.names {
+            Names::List(names) => names,
+            Names::Map(map) => {
+                if map.keys().enumerate().any(|(i, id)| *id != i as u64) {
                     return Err(format!("names ids are not 0, 1, 2, ...; {hint}"));
                 }
-                pairs.into_iter().map(|(_, name)| name).collect()
+                map.into_values().collect()
             }
-            _ => return Err(format!("no `names`; {hint}")),
         };
         let classes = names
             .iter()

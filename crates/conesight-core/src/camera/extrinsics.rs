@@ -20,12 +20,10 @@
 
 use std::path::Path;
 
+use super::ros::{field_error, read_text};
+use crate::error::ConfigError;
 use nalgebra::{Isometry3, Quaternion, Rotation3, Translation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
-use serde_yaml::{Mapping, Value};
-
-use super::ros::{field_error, number, numbers, parse_mapping, read_text, required};
-use crate::error::ConfigError;
 
 /// What an extrinsics file should look like, for YAML syntax errors.
 const EXTRINSICS_HINT: &str = "a mapping `vehicle_from_camera: {translation_m: [x, y, z], \
@@ -98,24 +96,18 @@ impl Extrinsics {
     /// messages. Errors name the field and the expected form; a quaternion is normalised when
     /// its norm is within 1e-3 of 1 and rejected otherwise.
     pub fn from_yaml_str(text: &str, what: &str) -> Result<Self, ConfigError> {
-        let mapping = parse_mapping(text, what, EXTRINSICS_HINT)?;
-        let pose_value = required(
-            &mapping,
-            "vehicle_from_camera",
-            what,
-            "vehicle_from_camera",
-            POSE_EXPECTED,
-        )?;
-        let Value::Mapping(pose) = pose_value else {
-            return Err(field_error(
-                what,
-                "vehicle_from_camera",
-                "is not a mapping",
-                POSE_EXPECTED,
-            ));
+        let file: ExtrinsicsFile =
+            super::yaml::from_str(text, what, EXTRINSICS_HINT, FIELDS, expected_for)?;
+        let pose = file.vehicle_from_camera;
+        let shortcut = pose.height_m.is_some() || pose.pitch_down_rad.is_some();
+        let full = pose.translation_m.is_some() || pose.rotation.is_some();
+        let finite = |value: f64, field: &'static str, expected: &'static str| {
+            if value.is_finite() {
+                Ok(value)
+            } else {
+                Err(field_error(what, field, format!("is {value}"), expected))
+            }
         };
-        let shortcut = pose.contains_key("height_m") || pose.contains_key("pitch_down_rad");
-        let full = pose.contains_key("translation_m") || pose.contains_key("rotation");
         match (shortcut, full) {
             (true, true) => Err(field_error(
                 what,
@@ -124,46 +116,32 @@ impl Extrinsics {
                 POSE_EXPECTED,
             )),
             (true, false) => {
-                let height_m = number(
-                    required(
-                        pose,
-                        "height_m",
+                let Some(height_m) = pose.height_m else {
+                    return Err(field_error(
                         what,
                         "vehicle_from_camera.height_m",
+                        "is missing",
                         "metres",
-                    )?,
-                    what,
-                    "vehicle_from_camera.height_m",
-                    "a number of metres",
-                )?;
-                let pitch_down_rad = match pose.get("pitch_down_rad") {
-                    Some(value) => number(
-                        value,
-                        what,
-                        "vehicle_from_camera.pitch_down_rad",
-                        "a number of radians (positive looks down)",
-                    )?,
-                    None => 0.0,
+                    ));
                 };
+                let height_m = finite(height_m, "vehicle_from_camera.height_m", "metres")?;
+                let pitch_down_rad = finite(
+                    pose.pitch_down_rad.unwrap_or(0.0),
+                    "vehicle_from_camera.pitch_down_rad",
+                    "a number of radians (positive looks down)",
+                )?;
                 Ok(Self::from_height_pitch(height_m, pitch_down_rad))
             }
             (false, _) => {
-                let translation = numbers(
-                    required(
-                        pose,
-                        "translation_m",
-                        what,
-                        "vehicle_from_camera.translation_m",
-                        "[x, y, z] in metres",
-                    )?,
-                    Some(3),
-                    what,
-                    "vehicle_from_camera.translation_m",
-                    "[x, y, z] in metres",
-                )?;
-                let rotation = body_rotation(pose, what)?;
+                const FIELD: &str = "vehicle_from_camera.translation_m";
+                const EXPECTED: &str = "[x, y, z] in metres";
+                let Some(t) = pose.translation_m else {
+                    return Err(field_error(what, FIELD, "is missing", EXPECTED));
+                };
+                let t = finite_list(&t, 3, what, FIELD, EXPECTED)?;
+                let rotation = body_rotation(pose.rotation, what)?;
                 Ok(Self::from_body_pose(
-                    Vector3::new(translation[0], translation[1], translation[2]),
+                    Vector3::new(t[0], t[1], t[2]),
                     rotation,
                 ))
             }
@@ -190,28 +168,94 @@ impl Extrinsics {
     }
 }
 
+/// An extrinsics file (module docs).
+#[derive(Debug, Deserialize)]
+struct ExtrinsicsFile {
+    vehicle_from_camera: PoseFile,
+}
+
+/// `vehicle_from_camera`: the full pose or the height/pitch shortcut.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PoseFile {
+    translation_m: Option<Vec<f64>>,
+    rotation: Option<RotationFile>,
+    height_m: Option<f64>,
+    pitch_down_rad: Option<f64>,
+}
+
+/// `vehicle_from_camera.rotation`: exactly one of the two.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RotationFile {
+    rpy_rad: Option<Vec<f64>>,
+    quaternion_xyzw: Option<Vec<f64>>,
+}
+
+/// The fields an extrinsics error may name.
+const FIELDS: &[&str] = &[
+    "vehicle_from_camera",
+    "vehicle_from_camera.translation_m",
+    "vehicle_from_camera.rotation",
+    "vehicle_from_camera.rotation.rpy_rad",
+    "vehicle_from_camera.rotation.quaternion_xyzw",
+    "vehicle_from_camera.height_m",
+    "vehicle_from_camera.pitch_down_rad",
+];
+
+/// The expected form of an extrinsics field, for error messages.
+fn expected_for(field: &str) -> &'static str {
+    match field {
+        "vehicle_from_camera.translation_m" => "[x, y, z] in metres",
+        "vehicle_from_camera.height_m" => "a number of metres",
+        "vehicle_from_camera.pitch_down_rad" => "a number of radians (positive looks down)",
+        "vehicle_from_camera.rotation.rpy_rad" => "[roll, pitch, yaw] in radians",
+        "vehicle_from_camera.rotation.quaternion_xyzw" => "[x, y, z, w] with norm 1 (within 1e-3)",
+        "vehicle_from_camera.rotation" => ROTATION_EXPECTED,
+        _ => POSE_EXPECTED,
+    }
+}
+
+/// `values` if it has `length` finite numbers, else an error naming `field`.
+fn finite_list<'a>(
+    values: &'a [f64],
+    length: usize,
+    what: &str,
+    field: &'static str,
+    expected: &'static str,
+) -> Result<&'a [f64], ConfigError> {
+    if values.len() != length {
+        return Err(field_error(
+            what,
+            field,
+            format!("has {} entries instead of {length}", values.len()),
+            expected,
+        ));
+    }
+    if let Some(bad) = values.iter().find(|v| !v.is_finite()) {
+        return Err(field_error(what, field, format!("holds {bad}"), expected));
+    }
+    Ok(values)
+}
+
 /// The body rotation under `vehicle_from_camera.rotation`.
-fn body_rotation(pose: &Mapping, what: &str) -> Result<UnitQuaternion<f64>, ConfigError> {
-    let value = required(
-        pose,
-        "rotation",
-        what,
-        "vehicle_from_camera.rotation",
-        ROTATION_EXPECTED,
-    )?;
-    let Value::Mapping(rotation) = value else {
+fn body_rotation(
+    rotation: Option<RotationFile>,
+    what: &str,
+) -> Result<UnitQuaternion<f64>, ConfigError> {
+    let Some(rotation) = rotation else {
         return Err(field_error(
             what,
             "vehicle_from_camera.rotation",
-            "is not a mapping",
+            "is missing",
             ROTATION_EXPECTED,
         ));
     };
-    match (rotation.get("rpy_rad"), rotation.get("quaternion_xyzw")) {
+    match (rotation.rpy_rad, rotation.quaternion_xyzw) {
         (Some(rpy), None) => {
-            let rpy = numbers(
-                rpy,
-                Some(3),
+            let rpy = finite_list(
+                &rpy,
+                3,
                 what,
                 "vehicle_from_camera.rotation.rpy_rad",
                 "[roll, pitch, yaw] in radians",
@@ -221,7 +265,7 @@ fn body_rotation(pose: &Mapping, what: &str) -> Result<UnitQuaternion<f64>, Conf
         (None, Some(quaternion)) => {
             const FIELD: &str = "vehicle_from_camera.rotation.quaternion_xyzw";
             const EXPECTED: &str = "[x, y, z, w] with norm 1 (within 1e-3)";
-            let q = numbers(quaternion, Some(4), what, FIELD, EXPECTED)?;
+            let q = finite_list(&quaternion, 4, what, FIELD, EXPECTED)?;
             let quaternion = Quaternion::new(q[3], q[0], q[1], q[2]);
             let norm = quaternion.norm();
             if (norm - 1.0).abs() > QUATERNION_NORM_TOLERANCE {

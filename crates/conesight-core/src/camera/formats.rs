@@ -14,10 +14,10 @@
 
 use std::path::Path;
 
-use serde_yaml::{Mapping, Value};
+use serde::Deserialize;
 
-use super::ros::{field_error, parse_mapping, read_text};
-use super::{Camera, Distortion, DistortionModel};
+use super::Camera;
+use super::ros::{RosCameraInfo, YamlMatrix, field_error, read_text};
 use crate::error::ConfigError;
 
 const OPENCV_HINT: &str = "an OpenCV FileStorage YAML (%YAML:1.0) with image_width, \
@@ -66,34 +66,83 @@ fn plain_yaml(text: &str) -> String {
         .join("\n")
 }
 
-/// A mapping back to YAML text, for the ROS reader.
-fn to_yaml(mapping: &Mapping, what: &str, hint: &'static str) -> Result<String, ConfigError> {
-    serde_yaml::to_string(mapping).map_err(|error| ConfigError::Yaml {
-        what: what.to_owned(),
-        message: error.to_string(),
-        hint,
-    })
+/// An OpenCV FileStorage calibration (module docs); other keys are ignored.
+#[derive(Debug, Deserialize)]
+struct OpenCvCalibration {
+    image_width: u32,
+    image_height: u32,
+    camera_matrix: YamlMatrix,
+    #[serde(default)]
+    distortion_coefficients: Option<YamlMatrix>,
+    #[serde(default)]
+    distortion_model: Option<String>,
 }
+
+const OPENCV_FIELDS: &[&str] = &[
+    "image_width",
+    "image_height",
+    "camera_matrix",
+    "camera_matrix.rows",
+    "camera_matrix.cols",
+    "camera_matrix.data",
+    "distortion_coefficients",
+    "distortion_coefficients.rows",
+    "distortion_coefficients.cols",
+    "distortion_coefficients.data",
+    "distortion_model",
+];
+
+/// One camera of a Kalibr camchain; other keys (`T_cn_cnm1`, `rostopic`, ...) are ignored.
+#[derive(Debug, Deserialize)]
+struct KalibrCamera {
+    camera_model: String,
+    intrinsics: Vec<f64>,
+    distortion_model: String,
+    #[serde(default)]
+    distortion_coeffs: Vec<f64>,
+    resolution: Vec<u32>,
+}
+
+const KALIBR_FIELDS: &[&str] = &[
+    "camera_model",
+    "intrinsics",
+    "distortion_model",
+    "distortion_coeffs",
+    "resolution",
+];
 
 impl Camera {
     /// Reads an OpenCV FileStorage calibration (module docs).
     pub fn from_opencv_yaml_str(text: &str, what: &str) -> Result<Self, ConfigError> {
-        let plain = plain_yaml(text);
-        let mut mapping = parse_mapping(&plain, what, OPENCV_HINT)?;
-        if !mapping.contains_key("distortion_model") {
-            let count = mapping
-                .get("distortion_coefficients")
-                .and_then(|d| d.get("data"))
-                .and_then(Value::as_sequence)
-                .map_or(0, Vec::len);
-            let model = match count {
+        let calibration: OpenCvCalibration =
+            super::yaml::from_str(&plain_yaml(text), what, OPENCV_HINT, OPENCV_FIELDS, |_| {
+                OPENCV_HINT
+            })?;
+        let count = calibration
+            .distortion_coefficients
+            .as_ref()
+            .map_or(0, |d| d.data.len());
+        let model = calibration.distortion_model.unwrap_or_else(|| {
+            match count {
                 8 => "rational_polynomial",
                 0 => "none",
                 _ => "plumb_bob",
-            };
-            mapping.insert("distortion_model".into(), model.into());
-        }
-        Self::from_ros_yaml_str(&to_yaml(&mapping, what, OPENCV_HINT)?, what)
+            }
+            .to_owned()
+        });
+        Self::from_camera_info(
+            &RosCameraInfo {
+                image_width: calibration.image_width,
+                image_height: calibration.image_height,
+                camera_name: None,
+                camera_matrix: calibration.camera_matrix,
+                distortion_model: model,
+                distortion_coefficients: calibration.distortion_coefficients,
+                rectification_matrix: None,
+                projection_matrix: None,
+            },
+            what,
+        )
     }
 
     /// Reads camera `camera` (e.g. `cam0`; `None` = `cam0`) of a Kalibr camchain (module docs).
@@ -102,9 +151,14 @@ impl Camera {
         camera: Option<&str>,
         what: &str,
     ) -> Result<Self, ConfigError> {
-        let mapping = parse_mapping(text, what, KALIBR_HINT)?;
         let name = camera.unwrap_or("cam0");
-        let Some(Value::Mapping(cam)) = mapping.get(name) else {
+        let chain: serde_yaml_ng::Value =
+            serde_yaml_ng::from_str(text).map_err(|error| ConfigError::Yaml {
+                what: what.to_owned(),
+                message: error.to_string(),
+                hint: KALIBR_HINT,
+            })?;
+        let Some(entry) = chain.get(name).cloned() else {
             return Err(field_error(
                 what,
                 "camN",
@@ -112,39 +166,27 @@ impl Camera {
                 KALIBR_EXPECTED,
             ));
         };
-        let numbers = |key: &'static str, count: usize| -> Result<Vec<f64>, ConfigError> {
-            let values = cam
-                .get(key)
-                .and_then(Value::as_sequence)
-                .map(|seq| seq.iter().map(Value::as_f64).collect::<Option<Vec<f64>>>())
-                .ok_or_else(|| field_error(what, key, "is missing or not a list", KALIBR_EXPECTED))?
-                .ok_or_else(|| field_error(what, key, "holds a non-number", KALIBR_EXPECTED))?;
-            if values.len() != count || !values.iter().all(|v| v.is_finite()) {
-                return Err(field_error(
-                    what,
-                    key,
-                    format!("has {} values", values.len()),
-                    KALIBR_EXPECTED,
-                ));
-            }
-            Ok(values)
-        };
-        let text_of = |key: &'static str| cam.get(key).and_then(Value::as_str).unwrap_or("");
-        if text_of("camera_model") != "pinhole" {
+        let what_camera = format!("{what} ({name})");
+        let cam: KalibrCamera =
+            super::yaml::from_value(entry, &what_camera, KALIBR_HINT, KALIBR_FIELDS, |_| {
+                KALIBR_EXPECTED
+            })?;
+        let what = what_camera.as_str();
+        if cam.camera_model != "pinhole" {
             return Err(field_error(
                 what,
                 "camera_model",
                 format!(
                     "is `{}`, which conesight does not support",
-                    text_of("camera_model")
+                    cam.camera_model
                 ),
                 KALIBR_EXPECTED,
             ));
         }
-        let model = match text_of("distortion_model") {
-            "radtan" => DistortionModel::PlumbBob,
-            "equidistant" => DistortionModel::Equidistant,
-            "none" => DistortionModel::PlumbBob,
+        let model = match cam.distortion_model.as_str() {
+            "radtan" => "plumb_bob",
+            "equidistant" => "equidistant",
+            "none" => "none",
             other => {
                 return Err(field_error(
                     what,
@@ -154,67 +196,43 @@ impl Camera {
                 ));
             }
         };
-        let intrinsics = numbers("intrinsics", 4)?;
-        let resolution = numbers("resolution", 2)?;
-        let coefficients = if text_of("distortion_model") == "none" {
-            vec![0.0; 4]
-        } else {
-            numbers("distortion_coeffs", 4)?
-        };
-        let distortion = Distortion::from_coefficients(model, &coefficients).ok_or_else(|| {
-            field_error(
+        let (Ok([fu, fv, pu, pv]), Ok([width, height])) = (
+            <[f64; 4]>::try_from(cam.intrinsics.as_slice()),
+            <[u32; 2]>::try_from(cam.resolution.as_slice()),
+        ) else {
+            return Err(field_error(
                 what,
-                "distortion_coeffs",
-                "does not fit the model",
+                "intrinsics",
+                format!(
+                    "has {} values and resolution {}",
+                    cam.intrinsics.len(),
+                    cam.resolution.len()
+                ),
                 KALIBR_EXPECTED,
-            )
-        })?;
-        let size = |v: f64, key: &'static str| {
-            if v >= 1.0 && v <= f64::from(u32::MAX) && v.fract() == 0.0 {
-                // Checked to be a whole number within u32 just above.
-                #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
-                Ok(v as u32)
-            } else {
-                Err(field_error(
-                    what,
-                    key,
-                    format!("has {v}"),
-                    "whole positive pixel counts",
-                ))
-            }
+            ));
         };
-        let width_px = size(resolution[0], "resolution")?;
-        let height_px = size(resolution[1], "resolution")?;
-        // Through the ROS reader, so every check (focal lengths, principal point) is the same.
-        let mut ros = Mapping::new();
-        ros.insert("image_width".into(), width_px.into());
-        ros.insert("image_height".into(), height_px.into());
-        let matrix = |rows: u32, cols: u32, data: Vec<f64>| {
-            let mut m = Mapping::new();
-            m.insert("rows".into(), rows.into());
-            m.insert("cols".into(), cols.into());
-            m.insert("data".into(), data.into());
-            Value::Mapping(m)
-        };
-        let [fu, fv, pu, pv] = [intrinsics[0], intrinsics[1], intrinsics[2], intrinsics[3]];
-        ros.insert(
-            "camera_matrix".into(),
-            matrix(3, 3, vec![fu, 0.0, pu, 0.0, fv, pv, 0.0, 0.0, 1.0]),
-        );
-        ros.insert(
-            "distortion_model".into(),
-            distortion.model.ros_name().into(),
-        );
-        let coefficients = distortion.coefficients();
-        ros.insert(
-            "distortion_coefficients".into(),
-            matrix(
-                1,
-                u32::try_from(coefficients.len()).unwrap_or(0),
-                coefficients,
-            ),
-        );
-        Self::from_ros_yaml_str(&to_yaml(&ros, what, KALIBR_HINT)?, what)
+        let coefficients = cam.distortion_coeffs;
+        Self::from_camera_info(
+            &RosCameraInfo {
+                image_width: width,
+                image_height: height,
+                camera_name: None,
+                camera_matrix: YamlMatrix {
+                    rows: 3,
+                    cols: 3,
+                    data: vec![fu, 0.0, pu, 0.0, fv, pv, 0.0, 0.0, 1.0],
+                },
+                distortion_model: model.to_owned(),
+                distortion_coefficients: (model != "none").then_some(YamlMatrix {
+                    rows: 1,
+                    cols: coefficients.len() as u64,
+                    data: coefficients,
+                }),
+                rectification_matrix: None,
+                projection_matrix: None,
+            },
+            what,
+        )
     }
 
     /// Reads a calibration file in any format conesight knows (ROS camera_info, OpenCV
@@ -234,6 +252,7 @@ impl Camera {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::camera::DistortionModel;
 
     const OPENCV: &str = "%YAML:1.0\n---\nimage_width: 1280\nimage_height: 720\n\
         camera_matrix: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n   \

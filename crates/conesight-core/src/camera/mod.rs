@@ -16,6 +16,7 @@
 mod extrinsics;
 mod formats;
 mod ros;
+mod yaml;
 
 pub use extrinsics::Extrinsics;
 pub use formats::CalibrationFormat;

@@ -22,7 +22,7 @@
 
 use std::path::Path;
 
-use serde_yaml::{Mapping, Value};
+use serde::Deserialize;
 
 use super::{Camera, Distortion, DistortionModel};
 use crate::error::ConfigError;
@@ -35,40 +35,6 @@ const CAMERA_INFO_HINT: &str = "a ROS camera_info YAML mapping with image_width,
 
 /// Tolerance on the fixed entries of the camera matrix (skew, bottom row).
 const CAMERA_MATRIX_FIXED_TOLERANCE: f64 = 1e-9;
-
-/// Parses YAML text into a mapping, naming `what` and the expected form on failure.
-pub(super) fn parse_mapping(
-    text: &str,
-    what: &str,
-    hint: &'static str,
-) -> Result<Mapping, ConfigError> {
-    let value: Value = serde_yaml::from_str(text).map_err(|error| ConfigError::Yaml {
-        what: what.to_owned(),
-        message: error.to_string(),
-        hint,
-    })?;
-    match value {
-        Value::Mapping(mapping) => Ok(mapping),
-        other => Err(ConfigError::Yaml {
-            what: what.to_owned(),
-            message: format!("the document is a {}, not a mapping", kind(&other)),
-            hint,
-        }),
-    }
-}
-
-/// A short name for the kind of a YAML value.
-fn kind(value: &Value) -> &'static str {
-    match value {
-        Value::Null => "null",
-        Value::Bool(_) => "boolean",
-        Value::Number(_) => "number",
-        Value::String(_) => "string",
-        Value::Sequence(_) => "list",
-        Value::Mapping(_) => "mapping",
-        Value::Tagged(_) => "tagged value",
-    }
-}
 
 /// Builds a [`ConfigError::Field`].
 pub(super) fn field_error(
@@ -93,102 +59,10 @@ pub(super) fn read_text(path: &Path) -> Result<String, ConfigError> {
     })
 }
 
-/// The value under `key`, or a "missing" error naming `field`.
-pub(super) fn required<'a>(
-    mapping: &'a Mapping,
-    key: &str,
-    what: &str,
-    field: &'static str,
-    expected: &'static str,
-) -> Result<&'a Value, ConfigError> {
-    mapping
-        .get(key)
-        .ok_or_else(|| field_error(what, field, "is missing", expected))
-}
-
-/// A finite number.
-pub(super) fn number(
-    value: &Value,
-    what: &str,
-    field: &'static str,
-    expected: &'static str,
-) -> Result<f64, ConfigError> {
-    match value.as_f64() {
-        Some(number) if number.is_finite() => Ok(number),
-        Some(number) => Err(field_error(what, field, format!("is {number}"), expected)),
-        None => Err(field_error(
-            what,
-            field,
-            format!("is a {}, not a number", kind(value)),
-            expected,
-        )),
-    }
-}
-
-/// A list of finite numbers, optionally of an exact length.
-pub(super) fn numbers(
-    value: &Value,
-    length: Option<usize>,
-    what: &str,
-    field: &'static str,
-    expected: &'static str,
-) -> Result<Vec<f64>, ConfigError> {
-    let Value::Sequence(items) = value else {
-        return Err(field_error(
-            what,
-            field,
-            format!("is a {}, not a list", kind(value)),
-            expected,
-        ));
-    };
-    if let Some(length) = length
-        && items.len() != length
-    {
-        return Err(field_error(
-            what,
-            field,
-            format!("has {} entries instead of {length}", items.len()),
-            expected,
-        ));
-    }
-    items
-        .iter()
-        .map(|item| number(item, what, field, expected))
-        .collect()
-}
-
-/// A positive integer that fits in u32.
-fn positive_u32(
-    value: &Value,
-    what: &str,
-    field: &'static str,
-    expected: &'static str,
-) -> Result<u32, ConfigError> {
-    match value.as_u64().map(u32::try_from) {
-        Some(Ok(number)) if number > 0 => Ok(number),
-        _ => Err(field_error(
-            what,
-            field,
-            format!("is {}", describe(value)),
-            expected,
-        )),
-    }
-}
-
-/// A value for an error message: the number itself, or its kind.
-fn describe(value: &Value) -> String {
-    match value {
-        Value::Number(number) => number.to_string(),
-        Value::String(text) => format!("the string `{text}`"),
-        other => format!("a {}", kind(other)),
-    }
-}
-
 /// The names of one matrix's fields, for error messages.
 struct MatrixFields {
     key: &'static str,
     rows: &'static str,
-    cols: &'static str,
     data: &'static str,
     expected: &'static str,
 }
@@ -196,7 +70,6 @@ struct MatrixFields {
 const CAMERA_MATRIX: MatrixFields = MatrixFields {
     key: "camera_matrix",
     rows: "camera_matrix.rows",
-    cols: "camera_matrix.cols",
     data: "camera_matrix.data",
     expected: "{rows: 3, cols: 3, data: [fx, 0, cx, 0, fy, cy, 0, 0, 1]} with fx, fy > 0 and \
                (cx, cy) inside the image",
@@ -204,7 +77,6 @@ const CAMERA_MATRIX: MatrixFields = MatrixFields {
 const DISTORTION: MatrixFields = MatrixFields {
     key: "distortion_coefficients",
     rows: "distortion_coefficients.rows",
-    cols: "distortion_coefficients.cols",
     data: "distortion_coefficients.data",
     expected: "{rows: 1, cols: 5, data: [k1, k2, p1, p2, k3]} for plumb_bob (4 coefficients mean \
                k3 = 0), 8 [k1, k2, p1, p2, k3, k4, k5, k6] for rational_polynomial, 4 [k1, k2, \
@@ -213,49 +85,32 @@ const DISTORTION: MatrixFields = MatrixFields {
 const RECTIFICATION: MatrixFields = MatrixFields {
     key: "rectification_matrix",
     rows: "rectification_matrix.rows",
-    cols: "rectification_matrix.cols",
     data: "rectification_matrix.data",
     expected: "{rows: 3, cols: 3, data: [9 numbers]} (identity for a monocular camera)",
 };
 const PROJECTION: MatrixFields = MatrixFields {
     key: "projection_matrix",
     rows: "projection_matrix.rows",
-    cols: "projection_matrix.cols",
     data: "projection_matrix.data",
     expected: "{rows: 3, cols: 4, data: [12 numbers]}",
 };
 
-/// Reads `{rows, cols, data}` and checks `rows * cols == data.len()` and, when given, the shape.
-fn matrix(
-    mapping: &Mapping,
+/// `{rows, cols, data}` as ROS and OpenCV write a matrix.
+#[derive(Debug, Deserialize)]
+pub(super) struct YamlMatrix {
+    pub(super) rows: u64,
+    pub(super) cols: u64,
+    pub(super) data: Vec<f64>,
+}
+
+/// Checks `rows * cols == data.len()`, finite entries and, when given, the shape.
+fn matrix<'a>(
+    m: &'a YamlMatrix,
     fields: &MatrixFields,
     shape: Option<(u64, u64)>,
     what: &str,
-) -> Result<(u64, u64, Vec<f64>), ConfigError> {
-    let value = required(mapping, fields.key, what, fields.key, fields.expected)?;
-    let Value::Mapping(inner) = value else {
-        return Err(field_error(
-            what,
-            fields.key,
-            format!("is a {}, not a mapping", kind(value)),
-            fields.expected,
-        ));
-    };
-    let dimension = |key: &str, field: &'static str| -> Result<u64, ConfigError> {
-        let value = required(inner, key, what, field, fields.expected)?;
-        value.as_u64().ok_or_else(|| {
-            field_error(
-                what,
-                field,
-                format!("is {}", describe(value)),
-                fields.expected,
-            )
-        })
-    };
-    let rows = dimension("rows", fields.rows)?;
-    let cols = dimension("cols", fields.cols)?;
-    let data_value = required(inner, "data", what, fields.data, fields.expected)?;
-    let data = numbers(data_value, None, what, fields.data, fields.expected)?;
+) -> Result<&'a [f64], ConfigError> {
+    let (rows, cols) = (m.rows, m.cols);
     if let Some((expected_rows, expected_cols)) = shape
         && (rows, cols) != (expected_rows, expected_cols)
     {
@@ -266,49 +121,47 @@ fn matrix(
             fields.expected,
         ));
     }
-    if rows.checked_mul(cols) != Some(data.len() as u64) {
+    if let Some(bad) = m.data.iter().find(|v| !v.is_finite()) {
+        return Err(field_error(
+            what,
+            fields.data,
+            format!("holds {bad}"),
+            fields.expected,
+        ));
+    }
+    if rows.checked_mul(cols) != Some(m.data.len() as u64) {
         return Err(field_error(
             what,
             fields.data,
             format!(
                 "has {} entries but rows x cols = {rows} x {cols}",
-                data.len()
+                m.data.len()
             ),
             fields.expected,
         ));
     }
-    Ok((rows, cols, data))
+    Ok(&m.data)
 }
 
+const MODEL_EXPECTED: &str = "plumb_bob, rational_polynomial, equidistant or none";
+
 /// The distortion from `distortion_model` and `distortion_coefficients`.
-fn distortion(mapping: &Mapping, what: &str) -> Result<Distortion, ConfigError> {
-    const MODEL_EXPECTED: &str = "plumb_bob, rational_polynomial, equidistant or none";
-    let model_value = required(
-        mapping,
-        "distortion_model",
-        what,
-        "distortion_model",
-        MODEL_EXPECTED,
-    )?;
-    let Some(model) = model_value.as_str() else {
-        return Err(field_error(
-            what,
-            "distortion_model",
-            format!("is {}", describe(model_value)),
-            MODEL_EXPECTED,
-        ));
-    };
-    let coefficients = if mapping.contains_key("distortion_coefficients") {
-        matrix(mapping, &DISTORTION, None, what)?.2
-    } else if model == "none" {
-        Vec::new()
-    } else {
-        return Err(field_error(
-            what,
-            DISTORTION.key,
-            "is missing",
-            DISTORTION.expected,
-        ));
+fn distortion(
+    model: &str,
+    coefficients: Option<&YamlMatrix>,
+    what: &str,
+) -> Result<Distortion, ConfigError> {
+    let coefficients = match coefficients {
+        Some(m) => matrix(m, &DISTORTION, None, what)?.to_vec(),
+        None if model == "none" => Vec::new(),
+        None => {
+            return Err(field_error(
+                what,
+                DISTORTION.key,
+                "is missing",
+                DISTORTION.expected,
+            ));
+        }
     };
     let model = match model {
         "plumb_bob" => DistortionModel::PlumbBob,
@@ -366,6 +219,62 @@ fn distortion(mapping: &Mapping, what: &str) -> Result<Distortion, ConfigError> 
     })
 }
 
+/// A ROS `camera_info` file (module docs); other keys are ignored.
+#[derive(Debug, Deserialize)]
+pub(super) struct RosCameraInfo {
+    pub(super) image_width: u32,
+    pub(super) image_height: u32,
+    // Checked to be a string (or absent); conesight names cameras by key, not by this.
+    #[serde(default)]
+    #[allow(dead_code)]
+    pub(super) camera_name: Option<String>,
+    pub(super) camera_matrix: YamlMatrix,
+    pub(super) distortion_model: String,
+    #[serde(default)]
+    pub(super) distortion_coefficients: Option<YamlMatrix>,
+    #[serde(default)]
+    pub(super) rectification_matrix: Option<YamlMatrix>,
+    #[serde(default)]
+    pub(super) projection_matrix: Option<YamlMatrix>,
+}
+
+/// The fields a camera_info error may name.
+const ROS_FIELDS: &[&str] = &[
+    "image_width",
+    "image_height",
+    "camera_name",
+    "distortion_model",
+    "camera_matrix",
+    "camera_matrix.rows",
+    "camera_matrix.cols",
+    "camera_matrix.data",
+    "distortion_coefficients",
+    "distortion_coefficients.rows",
+    "distortion_coefficients.cols",
+    "distortion_coefficients.data",
+    "rectification_matrix",
+    "rectification_matrix.rows",
+    "rectification_matrix.cols",
+    "rectification_matrix.data",
+    "projection_matrix",
+    "projection_matrix.rows",
+    "projection_matrix.cols",
+    "projection_matrix.data",
+];
+
+/// The expected form of a camera_info field, for error messages.
+fn expected_for(field: &str) -> &'static str {
+    match field.split('.').next().unwrap_or(field) {
+        "image_width" | "image_height" => "a positive integer (pixels)",
+        "camera_name" => "a string",
+        "distortion_model" => MODEL_EXPECTED,
+        "camera_matrix" => CAMERA_MATRIX.expected,
+        "distortion_coefficients" => DISTORTION.expected,
+        "rectification_matrix" => RECTIFICATION.expected,
+        _ => PROJECTION.expected,
+    }
+}
+
 impl Camera {
     /// Parses a ROS `camera_info` YAML text (see the module docs). `what` names the source
     /// (a path or a description) in error messages.
@@ -375,25 +284,29 @@ impl Camera {
     /// non-positive focal lengths, skew, or a principal point outside the image, zero image
     /// sizes, and unsupported distortion models.
     pub fn from_ros_yaml_str(text: &str, what: &str) -> Result<Self, ConfigError> {
-        let mapping = parse_mapping(text, what, CAMERA_INFO_HINT)?;
-        let size = |key: &'static str| {
-            let value = required(&mapping, key, what, key, "a positive integer (pixels)")?;
-            positive_u32(value, what, key, "a positive integer (pixels)")
-        };
-        let width_px = size("image_width")?;
-        let height_px = size("image_height")?;
-        if let Some(name) = mapping.get("camera_name")
-            && !(name.is_string() || name.is_null())
-        {
-            return Err(field_error(
-                what,
-                "camera_name",
-                format!("is {}", describe(name)),
-                "a string",
-            ));
-        }
+        let info: RosCameraInfo =
+            super::yaml::from_str(text, what, CAMERA_INFO_HINT, ROS_FIELDS, expected_for)?;
+        Self::from_camera_info(&info, what)
+    }
 
-        let (_, _, k) = matrix(&mapping, &CAMERA_MATRIX, Some((3, 3)), what)?;
+    /// The camera of a parsed camera_info, with every check of [`Self::from_ros_yaml_str`].
+    pub(super) fn from_camera_info(info: &RosCameraInfo, what: &str) -> Result<Self, ConfigError> {
+        let positive = |value: u32, key: &'static str| {
+            if value > 0 {
+                Ok(value)
+            } else {
+                Err(field_error(
+                    what,
+                    key,
+                    "is 0",
+                    "a positive integer (pixels)",
+                ))
+            }
+        };
+        let width_px = positive(info.image_width, "image_width")?;
+        let height_px = positive(info.image_height, "image_height")?;
+
+        let k = matrix(&info.camera_matrix, &CAMERA_MATRIX, Some((3, 3)), what)?;
         let (fx_px, cx_px, fy_px, cy_px) = (k[0], k[2], k[4], k[5]);
         if !(fx_px > 0.0 && fy_px > 0.0) {
             return Err(field_error(
@@ -437,12 +350,16 @@ impl Camera {
             ));
         }
 
-        let distortion = distortion(&mapping, what)?;
-        if mapping.contains_key(RECTIFICATION.key) {
-            matrix(&mapping, &RECTIFICATION, Some((3, 3)), what)?;
+        let distortion = distortion(
+            &info.distortion_model,
+            info.distortion_coefficients.as_ref(),
+            what,
+        )?;
+        if let Some(m) = &info.rectification_matrix {
+            matrix(m, &RECTIFICATION, Some((3, 3)), what)?;
         }
-        if mapping.contains_key(PROJECTION.key) {
-            matrix(&mapping, &PROJECTION, Some((3, 4)), what)?;
+        if let Some(m) = &info.projection_matrix {
+            matrix(m, &PROJECTION, Some((3, 4)), what)?;
         }
         Ok(Self {
             width_px,
@@ -475,7 +392,7 @@ impl Camera {
                 .join(", ")
         };
         let (fx, fy, cx, cy) = (self.fx_px, self.fy_px, self.cx_px, self.cy_px);
-        let name = serde_yaml::to_string(camera_name).unwrap_or_else(|_| "camera\n".to_owned());
+        let name = serde_yaml_ng::to_string(camera_name).unwrap_or_else(|_| "camera\n".to_owned());
         format!(
             "image_width: {}\nimage_height: {}\ncamera_name: {}\
              camera_matrix:\n  rows: 3\n  cols: 3\n  data: [{}]\n\
