@@ -18,7 +18,8 @@ use std::collections::BTreeMap;
 use std::time::Instant;
 
 use conesight_core::pnp::{
-    ConeBox, RansacParams, box_depth, box_estimate, fuse_box_depth, solve_pnp, solve_pnp_ransac,
+    ConeBox, RansacParams, add_common_mode, box_depth, box_estimate, fuse_box_depth, solve_pnp,
+    solve_pnp_ransac,
 };
 use conesight_core::{
     Camera, ConeClass, ConeModel, ConeObservation, ConePnpParams, ConeSolver, Extrinsics,
@@ -113,7 +114,10 @@ impl Variants {
             },
         );
         let start = Instant::now();
-        let fused = match (self.cone[size].solve(observation), &depth) {
+        let solved = self.cone[size]
+            .solve(observation)
+            .map(|e| add_common_mode(&e, observation, &self.camera, REFERENCE_SIGMA_PX));
+        let fused = match (solved, &depth) {
             (Ok(e), Ok(d)) => Ok(fuse_box_depth(&e, d)),
             (Ok(e), Err(_)) => Ok(e),
             (Err(_), Ok(d)) => Ok(box_estimate(d, &up)),

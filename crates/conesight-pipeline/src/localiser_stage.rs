@@ -7,7 +7,9 @@
 //! box alone with the larger covariance that goes with it ([`Ranging`] says which). A box cut
 //! by the image's top or bottom edge gives no depth; such a cone needs its keypoints.
 
-use conesight_core::pnp::{ConeBox, Ranging, box_depth, box_estimate, fuse_box_depth};
+use conesight_core::pnp::{
+    ConeBox, Ranging, add_common_mode, box_depth, box_estimate, fuse_box_depth,
+};
 use conesight_core::{Camera, ConeModel, ConePnpParams, ConeSolver, Extrinsics, GeometryError};
 use conesight_proto::{ConeKeypoints, LocatedCone};
 
@@ -94,7 +96,9 @@ impl LocaliserStage {
                     box_depth(&self.camera, &model, &cone_box).ok()
                 })
                 .flatten();
-            let solved = solver.solve(&cone.observation);
+            let solved = solver
+                .solve(&cone.observation)
+                .map(|e| add_common_mode(&e, &cone.observation, &self.camera, REFERENCE_SIGMA_PX));
             let (estimate, ranging) = match (solved, depth) {
                 (Ok(estimate), Some(depth)) => {
                     (fuse_box_depth(&estimate, &depth), Ranging::KeypointsAndBox)

@@ -10,6 +10,7 @@
 //!   EPnP (`epnp.rs`) + Levenberg-Marquardt (`lm.rs`), in `generic.rs`; RANSAC in `ransac.rs`.
 
 mod box_range;
+mod common_mode;
 mod cone;
 mod cone_gauss_newton;
 mod cone_init;
@@ -25,6 +26,7 @@ mod silhouette_jacobian;
 pub use box_range::{
     BOX_RANGE_RELATIVE_SIGMA, BoxDepth, ConeBox, Ranging, box_depth, box_estimate, fuse_box_depth,
 };
+pub use common_mode::{COMMON_MODE_SIGMA_FRACTION, add_common_mode};
 pub use cone::{ConeSolver, predicted_keypoints, solve_cone};
 pub use epnp::epnp;
 pub use generic::{PnpSolution, solve_pnp};
