@@ -17,7 +17,7 @@ use std::path::Path;
 use serde::Deserialize;
 
 use super::Camera;
-use super::ros::{RosCameraInfo, YamlMatrix, field_error, read_text};
+use super::ros::{ROS_FIELDS, RosCameraInfo, YamlMatrix, field_error, read_text};
 use crate::error::ConfigError;
 
 const OPENCV_HINT: &str = "an OpenCV FileStorage YAML (%YAML:1.0) with image_width, \
@@ -78,20 +78,6 @@ struct OpenCvCalibration {
     distortion_model: Option<String>,
 }
 
-const OPENCV_FIELDS: &[&str] = &[
-    "image_width",
-    "image_height",
-    "camera_matrix",
-    "camera_matrix.rows",
-    "camera_matrix.cols",
-    "camera_matrix.data",
-    "distortion_coefficients",
-    "distortion_coefficients.rows",
-    "distortion_coefficients.cols",
-    "distortion_coefficients.data",
-    "distortion_model",
-];
-
 /// One camera of a Kalibr camchain; other keys (`T_cn_cnm1`, `rostopic`, ...) are ignored.
 #[derive(Debug, Deserialize)]
 struct KalibrCamera {
@@ -115,7 +101,7 @@ impl Camera {
     /// Reads an OpenCV FileStorage calibration (module docs).
     pub fn from_opencv_yaml_str(text: &str, what: &str) -> Result<Self, ConfigError> {
         let calibration: OpenCvCalibration =
-            super::yaml::from_str(&plain_yaml(text), what, OPENCV_HINT, OPENCV_FIELDS, |_| {
+            super::yaml::from_str(&plain_yaml(text), what, OPENCV_HINT, ROS_FIELDS, |_| {
                 OPENCV_HINT
             })?;
         let count = calibration

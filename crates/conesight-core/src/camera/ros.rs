@@ -238,8 +238,8 @@ pub(super) struct RosCameraInfo {
     pub(super) projection_matrix: Option<YamlMatrix>,
 }
 
-/// The fields a camera_info error may name.
-const ROS_FIELDS: &[&str] = &[
+/// The fields a camera_info (or OpenCV FileStorage) error may name.
+pub(super) const ROS_FIELDS: &[&str] = &[
     "image_width",
     "image_height",
     "camera_name",
