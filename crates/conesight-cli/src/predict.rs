@@ -202,6 +202,7 @@ pub fn cones_json(result: &FrameResult, with_vehicle: bool) -> Vec<Value> {
                 value["position_camera_m"] = json!([p.x, p.y, p.z]);
                 value["range_m"] = json!(located.estimate.range_m());
                 value["covariance_m2"] = matrix_json(&located.estimate.covariance_m2);
+                value["ranging"] = json!(located.ranging.as_str());
                 if with_vehicle {
                     let v = located.position_in_vehicle;
                     value["position_vehicle_m"] = json!([v.x, v.y, v.z]);

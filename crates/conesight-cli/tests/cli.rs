@@ -335,6 +335,15 @@ fn readme_quickstart_predicts_the_sample_frame() {
         .filter(|c| c["position_camera_m"].is_array())
         .map(|c| array3(&c["position_camera_m"]))
         .collect();
+    for cone in lines[0]["cones"].as_array().unwrap() {
+        if cone["position_camera_m"].is_array() {
+            let ranging = cone["ranging"].as_str().unwrap_or("");
+            assert!(
+                ["keypoints", "keypoints+box", "box"].contains(&ranging),
+                "ranging {ranging:?}"
+            );
+        }
+    }
     for t in &near {
         let nearest = estimates
             .iter()
