@@ -13,10 +13,10 @@ use std::path::Path;
 use std::time::Instant;
 
 use anyhow::Context as _;
-use conesight_core::pnp::ConeBox;
 use conesight_core::{Camera, ConeClass};
 use conesight_onnx::ModelOptions;
 use conesight_pipeline::keypoint_stage::DEFAULT_MAX_CONES_PER_FRAME;
+use conesight_pipeline::localiser_stage::cone_box_of;
 use conesight_pipeline::{FrameTruth, InProcessPipeline, PipelineConfig, match_cones};
 use conesight_proto::{ConeDetection, ConeKeypoints};
 use conesight_sim::cli::CommonArgs;
@@ -324,13 +324,7 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Meta> {
                 let estimates = outcome
                     .as_ref()
                     .map(|o| {
-                        let b = &cone.bbox;
-                        let cone_box = ConeBox {
-                            x_min_px: b.x_min_px,
-                            y_min_px: b.y_min_px,
-                            x_max_px: b.x_max_px,
-                            y_max_px: b.y_max_px,
-                        };
+                        let cone_box = cone_box_of(&cone.bbox);
                         variants.solve_all(cone.class, &o.keypoints.observation, &cone_box)
                     })
                     .unwrap_or_default();

@@ -18,8 +18,7 @@ use std::collections::BTreeMap;
 use std::time::Instant;
 
 use conesight_core::pnp::{
-    ConeBox, RansacParams, add_common_mode, box_depth, box_estimate, fuse_box_depth, solve_pnp,
-    solve_pnp_ransac,
+    ConeBox, RansacParams, box_depth, box_estimate, locate_cone, solve_pnp, solve_pnp_ransac,
 };
 use conesight_core::{
     Camera, ConeClass, ConeModel, ConeObservation, ConePnpParams, ConeSolver, Extrinsics,
@@ -114,16 +113,15 @@ impl Variants {
             },
         );
         let start = Instant::now();
-        let solved = self.cone[size]
-            .solve(observation)
-            .map(|e| add_common_mode(&e, observation, &self.camera, REFERENCE_SIGMA_PX));
-        let fused = match (solved, &depth) {
-            (Ok(e), Ok(d)) => Ok(fuse_box_depth(&e, d)),
-            (Ok(e), Err(_)) => Ok(e),
-            (Err(_), Ok(d)) => Ok(box_estimate(d, &up)),
-            (Err(error), Err(_)) => Err(error),
-        };
-        let micros = start.elapsed().as_secs_f64() * 1e6 + box_micros;
+        let fused = locate_cone(
+            &self.cone[size],
+            &model,
+            observation,
+            Some(cone_box),
+            REFERENCE_SIGMA_PX,
+        )
+        .map(|(estimate, _)| estimate);
+        let micros = start.elapsed().as_secs_f64() * 1e6;
         out.insert(
             "cone_box".to_owned(),
             match fused {

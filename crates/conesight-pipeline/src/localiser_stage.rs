@@ -7,14 +7,22 @@
 //! box alone with the larger covariance that goes with it ([`Ranging`] says which). A box cut
 //! by the image's top or bottom edge gives no depth; such a cone needs its keypoints.
 
-use conesight_core::pnp::{
-    ConeBox, Ranging, add_common_mode, box_depth, box_estimate, fuse_box_depth,
-};
+use conesight_core::pnp::{ConeBox, locate_cone};
 use conesight_core::{Camera, ConeModel, ConePnpParams, ConeSolver, Extrinsics, GeometryError};
 use conesight_proto::{ConeKeypoints, LocatedCone};
 
 use crate::error::PipelineError;
 use crate::keypoint_stage::REFERENCE_SIGMA_PX;
+
+/// A detector box as the core's ranging takes it.
+pub fn cone_box_of(b: &conesight_vision::PixelBox) -> ConeBox {
+    ConeBox {
+        x_min_px: b.x_min_px,
+        y_min_px: b.y_min_px,
+        x_max_px: b.x_max_px,
+        y_max_px: b.y_max_px,
+    }
+}
 
 /// Cones the solver places farther than this are discarded as failures, metres.
 pub const MAX_RANGE_M: f64 = 150.0;
@@ -83,32 +91,18 @@ impl LocaliserStage {
             } else {
                 (&self.small, ConeModel::small())
             };
-            let b = &cone.detection.box_px;
-            let depth = self
+            let cone_box = self
                 .box_ranging
-                .then(|| {
-                    let cone_box = ConeBox {
-                        x_min_px: b.x_min_px,
-                        y_min_px: b.y_min_px,
-                        x_max_px: b.x_max_px,
-                        y_max_px: b.y_max_px,
-                    };
-                    box_depth(&self.camera, &model, &cone_box).ok()
-                })
-                .flatten();
-            let solved = solver
-                .solve(&cone.observation)
-                .map(|e| add_common_mode(&e, &cone.observation, &self.camera, REFERENCE_SIGMA_PX));
-            let (estimate, ranging) = match (solved, depth) {
-                (Ok(estimate), Some(depth)) => {
-                    (fuse_box_depth(&estimate, &depth), Ranging::KeypointsAndBox)
-                }
-                (Ok(estimate), None) => (estimate, Ranging::Keypoints),
-                (Err(_), Some(depth)) => (
-                    box_estimate(&depth, &solver.params().up_in_camera),
-                    Ranging::Box,
-                ),
-                (Err(error), None) => {
+                .then(|| cone_box_of(&cone.detection.box_px));
+            let (estimate, ranging) = match locate_cone(
+                solver,
+                &model,
+                &cone.observation,
+                cone_box.as_ref(),
+                REFERENCE_SIGMA_PX,
+            ) {
+                Ok(located) => located,
+                Err(error) => {
                     output.failed.push((index, error));
                     continue;
                 }

@@ -11,7 +11,8 @@
 
 use nalgebra::{Matrix3, Point2, Point3, Vector3};
 
-use super::params::ConeEstimate;
+use super::cone::ConeSolver;
+use super::params::{ConeEstimate, ConeObservation};
 use crate::camera::Camera;
 use crate::cone::{ConeModel, KEYPOINT_COUNT};
 use crate::error::GeometryError;
@@ -167,6 +168,35 @@ pub fn fuse_box_depth(estimate: &ConeEstimate, depth: &BoxDepth) -> ConeEstimate
     // Symmetrise away the rounding of the subtraction.
     fused.covariance_m2 = 0.5 * (updated + updated.transpose());
     fused
+}
+
+/// One cone as the localiser ranges it: keypoint PnP (its covariance widened by the keypoints'
+/// common-mode error, [`super::add_common_mode`]) with the box-height depth fused in when
+/// `cone_box` gives one; the box alone when the keypoints give no pose. `model` is the cone
+/// model `solver` was made for; `reference_sigma_px` turns the observation's weights back into
+/// keypoint sigmas. The error is the solver's when neither cue places the cone.
+pub fn locate_cone(
+    solver: &ConeSolver,
+    model: &ConeModel,
+    observation: &ConeObservation,
+    cone_box: Option<&ConeBox>,
+    reference_sigma_px: f64,
+) -> Result<(ConeEstimate, Ranging), GeometryError> {
+    let depth = cone_box.and_then(|b| box_depth(&solver.camera, model, b).ok());
+    let solved = solver
+        .solve(observation)
+        .map(|e| super::add_common_mode(&e, observation, &solver.camera, reference_sigma_px));
+    match (solved, depth) {
+        (Ok(estimate), Some(depth)) => {
+            Ok((fuse_box_depth(&estimate, &depth), Ranging::KeypointsAndBox))
+        }
+        (Ok(estimate), None) => Ok((estimate, Ranging::Keypoints)),
+        (Err(_), Some(depth)) => Ok((
+            box_estimate(&depth, &solver.params.up_in_camera),
+            Ranging::Box,
+        )),
+        (Err(error), None) => Err(error),
+    }
 }
 
 #[cfg(test)]

@@ -28,12 +28,10 @@ pub fn add_common_mode(
     camera: &Camera,
     reference_sigma_px: f64,
 ) -> ConeEstimate {
-    let mut sigmas: Vec<f64> = observation
+    let mut sigmas = observation
         .weights
-        .iter()
-        .map(|w| reference_sigma_px / w.max(1e-9).sqrt())
-        .collect();
-    sigmas.sort_by(f64::total_cmp);
+        .map(|w| reference_sigma_px / w.max(1e-9).sqrt());
+    sigmas.sort_unstable_by(f64::total_cmp);
     let shift_px = COMMON_MODE_SIGMA_FRACTION * sigmas[sigmas.len() / 2];
     let p = estimate.position_in_camera.coords;
     let (Some(ray), true) = (p.try_normalize(1e-12), shift_px.is_finite()) else {

@@ -25,6 +25,7 @@ mod silhouette_jacobian;
 
 pub use box_range::{
     BOX_RANGE_RELATIVE_SIGMA, BoxDepth, ConeBox, Ranging, box_depth, box_estimate, fuse_box_depth,
+    locate_cone,
 };
 pub use common_mode::{COMMON_MODE_SIGMA_FRACTION, add_common_mode};
 pub use cone::{ConeSolver, predicted_keypoints, solve_cone};
