@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import argparse
 import json
-from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -37,7 +36,7 @@ from conesight_train.inspect_data import rektnet_crops
 from conesight_train.keypoints import KEYPOINT_NAMES
 from conesight_train.metrics import KeypointErrors
 from conesight_train.preprocess import patch_to_input
-from conesight_train.refine import evaluate_refined
+from conesight_train.refine import Predictor, evaluate_refined
 from conesight_train.train_keypoints import ConcatSources, open_real_source, open_sources
 
 # Reframings of real crops (issue 13): as another labeller or detector would frame the cone.
@@ -51,11 +50,8 @@ REFRAMINGS: dict[str, list[tuple[float, float, float]]] = {
 REPO_ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_REAL_CROPS = REPO_ROOT.parent / "shared" / "data" / "real-dev" / "fsoco-keypoint-crops"
 
-# float32 [N, 3, 80, 80] -> (keypoints [N, 7, 2], sigma_px [N, 7] or None)
 # Supervisely tag the labellers put on blurry or ambiguous crops (about 40 % of the set).
 BAD_QUALITY_TAG = "bad quality"
-
-Predictor = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray | None]]
 
 
 def predictor_for(path: Path) -> Predictor:

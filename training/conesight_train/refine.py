@@ -29,6 +29,7 @@ KEYPOINT_BOX_MARGINS = (0.28, 0.28, 0.08, 0.25)
 # Apex-to-base height below which the keypoints are taken as no cone (keep the first box).
 MIN_KEYPOINT_HEIGHT_PX = 2.0
 
+# float32 [N, 3, 80, 80] -> (keypoints [N, 7, 2], sigma_px [N, 7] or None)
 Predictor = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray | None]]
 
 
