@@ -20,6 +20,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         );
     }
     let descriptors = protox::compile(PROTO_FILES, [&include_root])?;
+    // The encoded FileDescriptorSet: recordings carry it as each channel's protobuf schema.
+    let out_dir = PathBuf::from(std::env::var("OUT_DIR")?);
+    std::fs::write(
+        out_dir.join("file_descriptor_set.bin"),
+        prost::Message::encode_to_vec(&descriptors),
+    )?;
     prost_build::Config::new()
         // Image bytes as `bytes::Bytes`: cloning a frame does not copy its pixels.
         .bytes([".conesight.v1.ImageFrame.data"])

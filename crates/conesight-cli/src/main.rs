@@ -7,6 +7,7 @@
 //! - `keypoints`: the keypoint network on cone crops, JSON lines ([`keypoints_cmd`]).
 //! - `demo`: the geometry demo and one rendered frame through keypoints + PnP ([`demo`]).
 //! - `sim`: the synthetic scene renderer ([`conesight_sim::cli`]).
+//! - `record`: the bus of a run into MCAP files ([`record_cmd`]).
 //! - `eval`: the paper's experiments on the held-out synthetic set ([`conesight_eval::cli`]);
 //!   `make eval` runs the same through the `conesight-eval` binary and writes the report.
 
@@ -15,6 +16,7 @@ mod demo;
 mod demo_frame;
 mod keypoints_cmd;
 mod predict;
+mod record_cmd;
 mod run;
 
 use clap::{Parser, Subcommand};
@@ -46,7 +48,12 @@ enum Command {
     /// The paper's experiments on the held-out synthetic set: JSONL records for the report
     /// (`make eval` writes docs/results.md).
     Eval(conesight_eval::cli::EvalArgs),
+    /// Record a run's bus (`conesight/<namespace>/**`) into MCAP files with protobuf schemas.
+    Record(record_cmd::RecordArgs),
 }
+
+/// The git revision the binary was built from (`build.rs`; `unknown` outside a checkout).
+pub(crate) const GIT_REVISION: &str = env!("CONESIGHT_GIT_REVISION");
 
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
@@ -57,5 +64,6 @@ fn main() -> anyhow::Result<()> {
         Command::Demo(args) => demo::run(&args),
         Command::Sim(args) => conesight_sim::cli::run(args),
         Command::Eval(args) => conesight_eval::cli::run(&args),
+        Command::Record(args) => record_cmd::run(args),
     }
 }

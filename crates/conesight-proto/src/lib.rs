@@ -17,6 +17,7 @@
 //! - `cone`: [`LocatedCone`] (a [`conesight_core::ConeEstimate`] in camera and vehicle frames).
 //! - `error`: [`ProtoError`], naming the offending field; [`ProtoError::kind`] for metrics.
 //! - [`limits`]: the size limits every decoder enforces.
+//! - [`FILE_DESCRIPTOR_SET`]: the encoded descriptors (MCAP schemas of recordings).
 //!
 //! Entry points: `TryFrom<&pb::X>` for single items, `pb::X::to_core()` for whole messages,
 //! `pb::X::new(header, ..)` to build them. Validation rejects NaN/inf, wrong counts, unknown enum
@@ -46,6 +47,11 @@ pub use keypoints::{
 pub mod pb {
     include!(concat!(env!("OUT_DIR"), "/conesight.v1.rs"));
 }
+
+/// The encoded `google.protobuf.FileDescriptorSet` of every file of `proto/conesight/v1` (with
+/// no imports outside it): the schema recordings carry, so any protobuf reader decodes them.
+pub const FILE_DESCRIPTOR_SET: &[u8] =
+    include_bytes!(concat!(env!("OUT_DIR"), "/file_descriptor_set.bin"));
 
 /// The prost `Message` trait, re-exported so callers need no direct prost dependency.
 pub use prost::Message;

@@ -1,0 +1,163 @@
+//! `conesight record`: the bus of one run (`conesight/<namespace>/**`, or chosen streams) into
+//! MCAP files (`conesight_record`), until Ctrl-C or `--duration-s`; a progress line on stderr.
+
+use std::path::PathBuf;
+use std::sync::atomic::Ordering;
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use conesight_bus::{Stream, Topics, ZenohArgs, open_session};
+use conesight_pipeline::Shutdown;
+use conesight_record::{Recorder, RecorderOptions};
+
+/// A stream to record.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum StreamName {
+    /// Image frames.
+    Frame,
+    /// Camera calibration.
+    CameraInfo,
+    /// 2D detections.
+    Detections,
+    /// Keypoints.
+    Keypoints,
+    /// 3D cones.
+    Cones,
+}
+
+impl From<StreamName> for Stream {
+    fn from(name: StreamName) -> Self {
+        match name {
+            StreamName::Frame => Self::Frame,
+            StreamName::CameraInfo => Self::CameraInfo,
+            StreamName::Detections => Self::Detections,
+            StreamName::Keypoints => Self::Keypoints,
+            StreamName::Cones => Self::Cones,
+        }
+    }
+}
+
+/// Arguments of `conesight record`.
+#[derive(Debug, clap::Args)]
+pub struct RecordArgs {
+    /// Zenoh session and keys: `--namespace` and `--vehicle` name the run recorded.
+    #[command(flatten)]
+    zenoh: ZenohArgs,
+    /// The recording (with splitting, `NAME_0000.mcap`, `NAME_0001.mcap`, ...).
+    #[arg(long, short, default_value = "out/recording.mcap")]
+    out: PathBuf,
+    /// Streams to record, comma separated (default: every stream).
+    #[arg(long, value_enum, value_delimiter = ',')]
+    streams: Vec<StreamName>,
+    /// Stop after this many seconds (default: at Ctrl-C).
+    #[arg(long = "duration-s")]
+    duration_s: Option<f64>,
+    /// Start a new file when the current one passes this many MB.
+    #[arg(long = "split-size-mb")]
+    split_size_mb: Option<u64>,
+    /// Start a new file after this many seconds.
+    #[arg(long = "split-duration-s")]
+    split_duration_s: Option<f64>,
+    /// Raw frames as they are (`raw`) or re-encoded as JPEG (`jpeg`, `--record-jpeg-quality`).
+    #[arg(long = "record-frames", value_enum, default_value_t = conesight_bus::FrameEncoding::Raw)]
+    record_frames: conesight_bus::FrameEncoding,
+    /// JPEG quality of re-encoded frames, 1..=100.
+    #[arg(long = "record-jpeg-quality", default_value_t = 90,
+          value_parser = clap::value_parser!(u8).range(1..=100))]
+    record_jpeg_quality: u8,
+    /// Messages waiting for the disk at most (more are dropped and counted).
+    #[arg(long = "queue-len", default_value_t = 16)]
+    queue_len: usize,
+    /// Target uncompressed chunk size, MiB (memory per open chunk).
+    #[arg(long = "chunk-mb", default_value_t = 8)]
+    chunk_mb: u64,
+    /// Models the run uses, hashed (sha256) into the metadata, comma separated.
+    #[arg(long, value_delimiter = ',')]
+    models: Vec<PathBuf>,
+}
+
+/// Runs `conesight record`.
+pub fn run(args: RecordArgs) -> anyhow::Result<()> {
+    conesight_service::init_tracing();
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .context("starting the async runtime")?;
+    runtime.block_on(run_async(args))
+}
+
+async fn run_async(args: RecordArgs) -> anyhow::Result<()> {
+    let shutdown = Shutdown::new();
+    shutdown.trigger_on_signal();
+    let session = open_session(&args.zenoh).await?;
+    let topics = Topics::from_args(&args.zenoh)?;
+    let mut options = RecorderOptions::new(&args.out);
+    options.streams = args.streams.iter().map(|s| Stream::from(*s)).collect();
+    options.queue_len = args.queue_len;
+    options.jpeg_quality = (args.record_frames == conesight_bus::FrameEncoding::Jpeg)
+        .then_some(args.record_jpeg_quality);
+    options.sink.chunk_bytes = args.chunk_mb.max(1) << 20;
+    options.sink.split_bytes = args.split_size_mb.map(|mb| mb.saturating_mul(1_000_000));
+    options.sink.split_after = args.split_duration_s.map(Duration::from_secs_f64);
+    let metadata = &mut options.sink.metadata;
+    metadata.insert("git_revision".into(), crate::GIT_REVISION.to_owned());
+    metadata.insert(
+        "recorder".into(),
+        format!("conesight {}", env!("CARGO_PKG_VERSION")),
+    );
+    for model in &args.models {
+        let bytes = std::fs::read(model)
+            .with_context(|| format!("cannot read the model {} (--models)", model.display()))?;
+        metadata.insert(
+            format!("model_size_bytes/{}", model.display()),
+            bytes.len().to_string(),
+        );
+    }
+    let recorder = Recorder::start(&session, &topics, options)
+        .await
+        .with_context(|| format!("starting the recorder on {}", args.out.display()))?;
+    eprintln!(
+        "recording conesight/{}/** into {} (Ctrl-C stops)",
+        topics.namespace(),
+        args.out.display()
+    );
+    let started = Instant::now();
+    let progress = indicatif::ProgressBar::new_spinner();
+    let deadline = args.duration_s.map(Duration::from_secs_f64);
+    loop {
+        tokio::select! {
+            () = shutdown.wait() => break,
+            () = tokio::time::sleep(Duration::from_millis(250)) => {}
+        }
+        let stats = recorder.stats();
+        progress.set_message(format!(
+            "{} messages, {:.1} MB, {} dropped",
+            stats.written.load(Ordering::Relaxed),
+            stats.bytes.load(Ordering::Relaxed) as f64 / 1e6,
+            stats.dropped.load(Ordering::Relaxed)
+        ));
+        progress.tick();
+        if deadline.is_some_and(|d| started.elapsed() >= d) {
+            break;
+        }
+    }
+    progress.finish_and_clear();
+    let stats = recorder.stats().clone();
+    let files = tokio::task::block_in_place(|| recorder.stop())?;
+    if let Err(error) = session.close().await {
+        tracing::warn!(%error, "closing the Zenoh session");
+    }
+    println!(
+        "recorded {} messages ({:.1} MB before compression, {} dropped) in {:.1} s: {}",
+        stats.written.load(Ordering::Relaxed),
+        stats.bytes.load(Ordering::Relaxed) as f64 / 1e6,
+        stats.dropped.load(Ordering::Relaxed),
+        started.elapsed().as_secs_f64(),
+        files
+            .iter()
+            .map(|p| p.display().to_string())
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    Ok(())
+}
