@@ -41,26 +41,31 @@ def test_every_message_decodes_with_the_schema_the_file_carries(tmp_path: Path) 
     binary = find_binary()
     if binary is None:
         pytest.skip("target/*/conesight not built (cargo build -p conesight-cli)")
-    if "record" not in subprocess.run(
-        [binary, "--help"], capture_output=True, text=True, check=True
-    ).stdout:
+    if (
+        "record"
+        not in subprocess.run([binary, "--help"], capture_output=True, text=True, check=True).stdout
+    ):
         pytest.skip("this conesight binary has no `record` subcommand (rebuild it)")
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     namespace = f"pytest{free_port()}"
     out = tmp_path / "run.mcap"
     recorder = subprocess.Popen(
-        [binary, "record", "--namespace", namespace, "--zenoh-listen", endpoint]
-        + ["--out", str(out), "--duration-s", "8", "--record-frames", "jpeg"],
+        [
+            *(binary, "record", "--namespace", namespace, "--zenoh-listen", endpoint),
+            *("--out", str(out), "--duration-s", "8", "--record-frames", "jpeg"),
+        ],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
     )
     try:
         subprocess.run(
-            [binary, "run", "--services", "camera", "--boxes", "truth"]
-            + ["--namespace", namespace, "--zenoh-connect", endpoint]
-            + ["--zenoh-listen", "tcp/127.0.0.1:0", "--frames", "20", "--rate-hz", "10"]
-            + ["--preload", "2", "--out", str(tmp_path / "run")],
+            [
+                *(binary, "run", "--services", "camera", "--boxes", "truth"),
+                *("--namespace", namespace, "--zenoh-connect", endpoint),
+                *("--zenoh-listen", "tcp/127.0.0.1:0", "--frames", "20", "--rate-hz", "10"),
+                *("--preload", "2", "--out", str(tmp_path / "run")),
+            ],
             capture_output=True,
             text=True,
             timeout=120,
@@ -82,7 +87,7 @@ def test_every_message_decodes_with_the_schema_the_file_carries(tmp_path: Path) 
             if schema.name == "conesight.v1.ImageFrame":
                 assert decoded.width_px > 0 and len(decoded.data) > 0
         metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
-    assert EXPECTED_SCHEMAS <= set(counts), counts
+    assert set(counts) >= EXPECTED_SCHEMAS, counts
     assert counts["conesight.v1.ImageFrame"] >= 10, (counts, stdout)
     assert metadata["conesight"]["namespace"] == namespace
     assert any(name.startswith("calibration/") for name in metadata), metadata
