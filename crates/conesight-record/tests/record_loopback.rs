@@ -142,7 +142,20 @@ async fn frames_camera_info_and_cones_are_recorded_with_their_schemas() {
             pb::Header::new("front", sequence, 1_000 + sequence, "front_optical"),
             &[],
         );
+        let before = recorder
+            .stats()
+            .written
+            .load(std::sync::atomic::Ordering::Relaxed);
         cones.put(encode(&message)).await.unwrap();
+        // Wait for these cones, so the next frame's check counts only that frame.
+        while recorder
+            .stats()
+            .written
+            .load(std::sync::atomic::Ordering::Relaxed)
+            == before
+        {
+            tokio::time::sleep(Duration::from_millis(10)).await;
+        }
     }
     tokio::time::sleep(Duration::from_millis(300)).await;
     let files = tokio::task::block_in_place(|| recorder.stop()).unwrap();
