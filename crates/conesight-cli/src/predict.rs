@@ -151,7 +151,10 @@ fn predict_one(
             } else {
                 boxes.to_path_buf()
             };
-            Some(read_boxes(&file, image.width(), image.height())?)
+            let given = read_boxes(&file, image.width(), image.height())?;
+            // Every given box is processed: the per-frame cap guards the live services only.
+            pipeline.keypoint_stage().set_max_cones(given.len());
+            Some(given)
         }
     };
     Ok(pipeline.process(&image, given.as_deref())?)

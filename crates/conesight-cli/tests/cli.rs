@@ -210,6 +210,52 @@ fn predict_with_given_boxes_keeps_every_box() {
     }
 }
 
+/// More given boxes than the live services' per-frame cap (128) are all processed; a box
+/// wholly outside the image is refused with its line number, and the command fails.
+#[test]
+fn predict_processes_every_given_box_and_names_a_box_outside_the_image() {
+    let dir = TempDir::new("many-boxes");
+    render(&dir.0);
+    let image = dir.0.join("images/000000.png");
+    let camera = dir.0.join("camera_info/000000.yaml");
+    let many = dir.0.join("many.txt");
+    let lines: Vec<String> = (0..300)
+        .map(|i| {
+            let (col, row) = (i % 30, i / 30);
+            format!("0 {:.4} {:.4} 0.02 0.05", 0.02 + col as f64 * 0.032, 0.1 + row as f64 * 0.08)
+        })
+        .collect();
+    std::fs::write(&many, lines.join("\n")).unwrap();
+    let output = conesight(&[
+        "predict",
+        "--camera",
+        camera.to_str().unwrap(),
+        "--boxes",
+        many.to_str().unwrap(),
+        image.to_str().unwrap(),
+    ]);
+    assert!(output.status.success());
+    let result = &json_lines(&output)[0];
+    assert_eq!(result["cones"].as_array().unwrap().len(), 300, "every given box");
+
+    let outside = dir.0.join("outside.txt");
+    std::fs::write(&outside, "0 0.5 0.5 0.05 0.1\n0 1.6 0.5 0.05 0.1\n").unwrap();
+    let output = conesight(&[
+        "predict",
+        "--camera",
+        camera.to_str().unwrap(),
+        "--boxes",
+        outside.to_str().unwrap(),
+        image.to_str().unwrap(),
+    ]);
+    assert!(!output.status.success());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        stderr.contains("line 2") && stderr.contains("wholly outside"),
+        "{stderr}"
+    );
+}
+
 /// Tight crops of the near, fully visible cones of the rendered frame, with their true
 /// keypoints in crop pixels.
 fn tight_crops(dir: &Path) -> Vec<(PathBuf, Vec<[f64; 2]>)> {

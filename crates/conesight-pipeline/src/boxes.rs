@@ -152,13 +152,36 @@ pub fn parse_boxes_with(
         } else {
             kitti_line(&fields)
         };
-        match parsed {
+        match parsed.and_then(|d| match d {
+            Some(detection) => inside_image(detection, width_px, height_px).map(Some),
+            None => Ok(None),
+        }) {
             Ok(Some(detection)) => detections.push(detection),
             Ok(None) => {}
             Err(reason) => return Err((number + 1, reason)),
         }
     }
     Ok(detections)
+}
+
+/// `detection` when its box overlaps the `width_px` x `height_px` image (a box partly outside
+/// is kept: a cone cut by the image edge); a box wholly outside is an error.
+fn inside_image(
+    detection: ConeDetection,
+    width_px: u32,
+    height_px: u32,
+) -> Result<ConeDetection, String> {
+    let b = &detection.box_px;
+    // Pixel centres run from 0 to size - 1; the image's edges are half a pixel beyond.
+    let (right, bottom) = (f64::from(width_px) - 0.5, f64::from(height_px) - 0.5);
+    if b.x_max_px <= -0.5 || b.y_max_px <= -0.5 || b.x_min_px >= right || b.y_min_px >= bottom {
+        return Err(format!(
+            "box ({:.1}, {:.1})-({:.1}, {:.1}) lies wholly outside the {width_px}x{height_px} \
+             image; are the labels for another image size?",
+            b.x_min_px, b.y_min_px, b.x_max_px, b.y_max_px
+        ));
+    }
+    Ok(detection)
 }
 
 fn number(fields: &[&str], index: usize, what: &str) -> Result<f64, String> {
@@ -369,9 +392,16 @@ mod tests {
         assert_eq!(boxes[1].box_px.y_max_px, 60.0);
         assert_eq!(boxes[2].class, ConeClass::LargeOrange);
         assert!((boxes[2].score - 0.7).abs() < 1e-6);
-        let round_trip = parse_boxes(&kitti_line_of(&boxes[1]), 1, 1).unwrap_or_default();
+        let round_trip = parse_boxes(&kitti_line_of(&boxes[1]), 100, 100).unwrap_or_default();
         assert_eq!(round_trip.len(), 1);
         assert_eq!(round_trip[0].class, ConeClass::LargeOrange);
+    }
+
+    #[test]
+    fn a_box_partly_outside_the_image_is_kept() {
+        let boxes = parse_boxes("0 0.98 0.5 0.1 0.2", 10, 10).unwrap();
+        assert_eq!(boxes.len(), 1);
+        assert!(boxes[0].box_px.x_max_px > 9.5);
     }
 
     #[test]
@@ -383,6 +413,8 @@ mod tests {
             ("car 0 0 0 1 2 3 4", "unknown cone class"),
             ("blue_cone 0 0 0 1 2", "KITTI lines"),
             ("0 0.5 0.5 0.1 0.1 2.0", "score"),
+            ("0 1.5 0.5 0.1 0.1", "wholly outside the 10x10 image"),
+            ("blue 0 0 0 20 2 30 8", "wholly outside the 10x10 image"),
         ] {
             let (line, reason) = parse_boxes(&format!("\n{text}"), 10, 10)
                 .err()

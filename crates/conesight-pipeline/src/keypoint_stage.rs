@@ -15,6 +15,8 @@ use crate::error::PipelineError;
 pub const REFERENCE_SIGMA_PX: f64 = 1.0;
 /// Most cones sent through the network per frame; the highest-scoring are kept.
 pub const DEFAULT_MAX_CONES_PER_FRAME: usize = 128;
+/// Most patches in one inference call (128 patches are 9.8 MB of input).
+pub const BATCH_CONES: usize = 128;
 
 /// What the stage made of one frame.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -54,6 +56,12 @@ impl KeypointStage {
         self
     }
 
+    /// Sets the per-frame cap in place (at least 1); `conesight predict` lifts it to the number
+    /// of boxes it was given, so every given box is processed.
+    pub fn set_max_cones(&mut self, max_cones: usize) {
+        self.max_cones = max_cones.max(1);
+    }
+
     /// The network, for crops (`conesight keypoints`).
     pub fn net_mut(&mut self) -> &mut KeypointNet {
         &mut self.net
@@ -81,7 +89,11 @@ impl KeypointStage {
             usable.sort_unstable();
         }
         let boxes: Vec<_> = usable.iter().map(|i| detections[*i].box_px).collect();
-        let predictions = self.net.predict_boxes(frame, &boxes)?;
+        // Batches of at most BATCH_CONES, so a cap lifted far above it keeps memory bounded.
+        let mut predictions = Vec::with_capacity(boxes.len());
+        for chunk in boxes.chunks(BATCH_CONES) {
+            predictions.extend(self.net.predict_boxes(frame, chunk)?);
+        }
         output.cones = usable
             .iter()
             .zip(predictions)
