@@ -222,7 +222,11 @@ fn predict_processes_every_given_box_and_names_a_box_outside_the_image() {
     let lines: Vec<String> = (0..300)
         .map(|i| {
             let (col, row) = (i % 30, i / 30);
-            format!("0 {:.4} {:.4} 0.02 0.05", 0.02 + col as f64 * 0.032, 0.1 + row as f64 * 0.08)
+            format!(
+                "0 {:.4} {:.4} 0.02 0.05",
+                0.02 + col as f64 * 0.032,
+                0.1 + row as f64 * 0.08
+            )
         })
         .collect();
     std::fs::write(&many, lines.join("\n")).unwrap();
@@ -236,7 +240,11 @@ fn predict_processes_every_given_box_and_names_a_box_outside_the_image() {
     ]);
     assert!(output.status.success());
     let result = &json_lines(&output)[0];
-    assert_eq!(result["cones"].as_array().unwrap().len(), 300, "every given box");
+    assert_eq!(
+        result["cones"].as_array().unwrap().len(),
+        300,
+        "every given box"
+    );
 
     let outside = dir.0.join("outside.txt");
     std::fs::write(&outside, "0 0.5 0.5 0.05 0.1\n0 1.6 0.5 0.05 0.1\n").unwrap();

@@ -170,10 +170,10 @@ fn write_loop(
         if item.stream == Stream::CameraInfo {
             remember_calibration(&mut sink, &mut calibrated, &item)?;
         }
-        if let (Stream::Frame, Some(quality)) = (item.stream, jpeg_quality) {
-            if let Some(jpeg) = as_jpeg(&item.payload, quality) {
-                bytes = jpeg;
-            }
+        if let (Stream::Frame, Some(quality)) = (item.stream, jpeg_quality)
+            && let Some(jpeg) = as_jpeg(&item.payload, quality)
+        {
+            bytes = jpeg;
         }
         sink.write(
             &item.key,

@@ -1,6 +1,7 @@
 //! The recorder on a real Zenoh session pair on loopback: frames (raw, full size), camera info
 //! and cones recorded to a real MCAP file and read back with the `mcap` crate; a file cut
 //! where a `kill -9` would leave it still gives every closed chunk.
+#![allow(clippy::unwrap_used, clippy::expect_used, missing_docs)]
 
 use std::collections::BTreeSet;
 use std::time::{Duration, Instant};
@@ -159,7 +160,7 @@ async fn frames_camera_info_and_cones_are_recorded_with_their_schemas() {
     }
     tokio::time::sleep(Duration::from_millis(300)).await;
     let files = tokio::task::block_in_place(|| recorder.stop()).unwrap();
-    assert_eq!(files, [path.clone()]);
+    assert_eq!(files, std::slice::from_ref(&path));
     let bytes = std::fs::read(&path).unwrap();
     let messages = read_back(&bytes);
     let frame_sequences: BTreeSet<u64> = messages
