@@ -43,7 +43,7 @@ pub use qos::{
     RingSubscriber, StreamQos, declare_callback_subscriber, declare_publisher, declare_subscriber,
     publish, publish_payload,
 };
-pub use session::{open_session, shm_pool_bytes, zenoh_config};
+pub use session::{loopback_pair, open_session, shm_pool_bytes, zenoh_config};
 pub use topics::{Stream, Topics};
 
 /// The Zenoh crate, re-exported so services use the same version.

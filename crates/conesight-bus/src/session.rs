@@ -4,6 +4,7 @@ use zenoh::{Config, Session};
 
 use crate::args::{ZenohArgs, ZenohMode};
 use crate::error::BusError;
+use crate::topics::Topics;
 
 /// Shared-memory pool of a session without a config file, MiB: nine raw 1920x1200 RGB8 frames
 /// (6.9 MB each), so frames still held by subscribers (the detector's slot, the keypoint
@@ -109,6 +110,36 @@ fn json_string(value: &str) -> String {
 
 fn json_list(values: &[String]) -> String {
     serde_json::Value::from(values.to_vec()).to_string()
+}
+
+/// Two peer sessions on 127.0.0.1 in `namespace`, the second connected to the first (both
+/// listen on loopback only), with the namespace's keys: for tests and examples that need a
+/// real bus between two participants.
+pub async fn loopback_pair(namespace: &str) -> Result<(Session, Session, Topics), BusError> {
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|listener| listener.local_addr())
+        .map_err(|error| BusError::Open {
+            source: error.into(),
+        })?
+        .port();
+    let endpoint = format!("tcp/127.0.0.1:{port}");
+    let base = ZenohArgs {
+        namespace: namespace.to_owned(),
+        ..ZenohArgs::default()
+    };
+    let listener = open_session(&ZenohArgs {
+        listen: vec![endpoint.clone()],
+        ..base.clone()
+    })
+    .await?;
+    let connector = open_session(&ZenohArgs {
+        connect: vec![endpoint],
+        // Listen on loopback only too (Zenoh's default peer listener binds every interface).
+        listen: vec!["tcp/127.0.0.1:0".to_owned()],
+        ..base.clone()
+    })
+    .await?;
+    Ok((listener, connector, Topics::from_args(&base)?))
 }
 
 #[cfg(test)]

@@ -11,47 +11,20 @@ use conesight_bus::zenoh::Session;
 use conesight_bus::zenoh::pubsub::Publisher;
 use conesight_bus::zenoh::qos::{CongestionControl, Priority};
 use conesight_bus::{
-    PayloadStorage, PixelSlice, RingSubscriber, Stream, Topics, ZenohArgs,
-    declare_callback_subscriber, declare_publisher, declare_subscriber, decode, in_shared_memory,
-    open_session, publish, publish_payload, write_payload,
+    PayloadStorage, PixelSlice, RingSubscriber, Stream, Topics, declare_callback_subscriber,
+    declare_publisher, declare_subscriber, decode, in_shared_memory, loopback_pair, publish,
+    publish_payload, write_payload,
 };
 use conesight_proto::pb;
 
 /// How long declarations may take to propagate between the two peers.
 const PROPAGATION_TIMEOUT: Duration = Duration::from_secs(10);
 
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
-
 /// A listening peer and a peer connected to it, in a namespace of their own.
 async fn two_peers(namespace: &str) -> (Session, Session, Topics) {
     // Logs follow RUST_LOG (e.g. `RUST_LOG=zenoh=debug cargo test -p conesight-bus`).
     conesight_service::init_tracing();
-    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
-    let base = ZenohArgs {
-        namespace: namespace.to_owned(),
-        ..ZenohArgs::default()
-    };
-    let listener = open_session(&ZenohArgs {
-        listen: vec![endpoint.clone()],
-        ..base.clone()
-    })
-    .await
-    .unwrap();
-    let connector = open_session(&ZenohArgs {
-        connect: vec![endpoint],
-        // Listen on loopback only too (Zenoh's default peer listener binds every interface).
-        listen: vec!["tcp/127.0.0.1:0".to_owned()],
-        ..base.clone()
-    })
-    .await
-    .unwrap();
-    (listener, connector, Topics::from_args(&base).unwrap())
+    loopback_pair(namespace).await.unwrap()
 }
 
 /// Waits up to 3 s for `session`'s shared-memory pool, which starts on first use (it may never

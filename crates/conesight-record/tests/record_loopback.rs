@@ -7,38 +7,12 @@ use std::collections::BTreeSet;
 use std::time::{Duration, Instant};
 
 use conesight_bus::zenoh::Session;
-use conesight_bus::{Stream, Topics, ZenohArgs, declare_publisher, encode, open_session};
+use conesight_bus::{Stream, Topics, declare_publisher, encode, loopback_pair};
 use conesight_proto::{Message, pb};
 use conesight_record::{Recorder, RecorderOptions, message_name};
 
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
-
 async fn two_peers(namespace: &str) -> (Session, Session, Topics) {
-    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
-    let base = ZenohArgs {
-        namespace: namespace.to_owned(),
-        ..ZenohArgs::default()
-    };
-    let listener = open_session(&ZenohArgs {
-        listen: vec![endpoint.clone()],
-        ..base.clone()
-    })
-    .await
-    .unwrap();
-    let connector = open_session(&ZenohArgs {
-        connect: vec![endpoint],
-        listen: vec!["tcp/127.0.0.1:0".to_owned()],
-        ..base.clone()
-    })
-    .await
-    .unwrap();
-    (listener, connector, Topics::from_args(&base).unwrap())
+    loopback_pair(namespace).await.unwrap()
 }
 
 fn frame(sequence: u64) -> pb::ImageFrame {
