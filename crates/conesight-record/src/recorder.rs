@@ -6,11 +6,11 @@
 //! drains the queue into a [`McapSink`]. With `jpeg_quality` raw frames are re-encoded as
 //! JPEG on the writer thread before they are written.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
+use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
 use std::thread::JoinHandle;
 
 use conesight_bus::zenoh::Session;
@@ -121,11 +121,8 @@ impl Recorder {
                 log_time_ns: now_ns(),
                 payload: sample.payload().clone(),
             };
-            match callback_sender.try_send(item) {
-                Ok(()) => {}
-                Err(TrySendError::Full(_) | TrySendError::Disconnected(_)) => {
-                    callback_stats.dropped.fetch_add(1, Ordering::Relaxed);
-                }
+            if callback_sender.try_send(item).is_err() {
+                callback_stats.dropped.fetch_add(1, Ordering::Relaxed);
             }
         })
         .await?;
@@ -160,21 +157,21 @@ fn write_loop(
     stats: &RecorderStats,
     jpeg_quality: Option<u8>,
 ) -> Result<Vec<PathBuf>, RecordError> {
-    let mut calibrated: BTreeMap<String, ()> = BTreeMap::new();
+    let mut calibrated = BTreeSet::new();
     // Payloads of several slices (shared memory) are copied once here, on the writer thread.
     while let Ok(item) = receiver.recv() {
-        let mut bytes = item.payload.to_bytes().into_owned();
-        let publish_time_ns = peek_header(&bytes[..])
-            .map(|h| h.publish_time_ns)
-            .unwrap_or(item.log_time_ns);
         if item.stream == Stream::CameraInfo {
             remember_calibration(&mut sink, &mut calibrated, &item)?;
         }
-        if let (Stream::Frame, Some(quality)) = (item.stream, jpeg_quality)
-            && let Some(jpeg) = as_jpeg(&item.payload, quality)
-        {
-            bytes = jpeg;
-        }
+        // A frame re-encoded as JPEG is not copied first.
+        let jpeg = match (item.stream, jpeg_quality) {
+            (Stream::Frame, Some(quality)) => as_jpeg(&item.payload, quality),
+            _ => None,
+        };
+        let bytes = jpeg.unwrap_or_else(|| item.payload.to_bytes().into_owned());
+        let publish_time_ns = peek_header(&bytes[..])
+            .map(|h| h.publish_time_ns)
+            .unwrap_or(item.log_time_ns);
         sink.write(
             &item.key,
             item.stream,
@@ -203,16 +200,16 @@ fn as_jpeg(payload: &ZBytes, quality: u8) -> Option<Vec<u8>> {
 /// The first camera info of each camera becomes a metadata record `calibration/<key>`.
 fn remember_calibration(
     sink: &mut McapSink,
-    calibrated: &mut BTreeMap<String, ()>,
+    calibrated: &mut BTreeSet<String>,
     item: &Item,
 ) -> Result<(), RecordError> {
-    if calibrated.contains_key(&item.key) {
+    if calibrated.contains(&item.key) {
         return Ok(());
     }
     let Ok(info) = decode::<pb::CameraInfo>(&item.payload) else {
         return Ok(());
     };
-    calibrated.insert(item.key.clone(), ());
+    calibrated.insert(item.key.clone());
     let mut record = BTreeMap::new();
     record.insert("key".into(), item.key.clone());
     record.insert("camera_info".into(), format!("{info:?}"));
