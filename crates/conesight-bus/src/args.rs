@@ -85,6 +85,11 @@ pub struct ZenohArgs {
     #[arg(long = "jpeg-quality", env = "CONESIGHT_JPEG_QUALITY", default_value_t = 90,
           value_parser = clap::value_parser!(u8).range(1..=100))]
     pub jpeg_quality: u8,
+    /// Largest message Zenoh itself reassembles, bytes (its `transport/link/rx/
+    /// max_message_size`, 1 GiB by default): a larger one is refused fragment by fragment and
+    /// never buffered whole. Not a flag: a service sets it from its `--max-message-mb`.
+    #[arg(skip)]
+    pub rx_max_message_bytes: Option<usize>,
 }
 
 impl Default for ZenohArgs {
@@ -102,6 +107,7 @@ impl Default for ZenohArgs {
             vehicle: "car".to_owned(),
             frame_encoding: FrameEncoding::Raw,
             jpeg_quality: 90,
+            rx_max_message_bytes: None,
         }
     }
 }

@@ -66,6 +66,13 @@ pub fn zenoh_config(args: &ZenohArgs) -> Result<Config, BusError> {
             pool_mb.max(1).saturating_mul(1 << 20).to_string(),
         )?;
     }
+    if let Some(bytes) = args.rx_max_message_bytes {
+        set(
+            &mut config,
+            "transport/link/rx/max_message_size",
+            bytes.max(1 << 16).to_string(),
+        )?;
+    }
     Ok(config)
 }
 

@@ -109,7 +109,7 @@ async fn two_peers_exchange_detections() {
         Some(("front", Stream::Detections))
     );
     assert_eq!(sample.priority(), Priority::RealTime);
-    assert_eq!(sample.congestion_control(), CongestionControl::Block);
+    assert_eq!(sample.congestion_control(), CongestionControl::Drop);
     assert!(sample.express());
 
     // Another run's namespace on the same network sees nothing of this one.

@@ -165,7 +165,10 @@ async fn run_async(args: RunArgs) -> anyhow::Result<()> {
     } else if has(ServiceName::Detector) {
         println!("boxes: detector {}", detector_path.display());
     }
-    let session = open_session(&args.zenoh).await?;
+    // Zenoh's receive limit follows the services' message limit.
+    let session =
+        open_session(&CommonArgs::for_camera(args.zenoh.clone(), &args.camera).zenoh_with_limits())
+            .await?;
     let topics = Topics::from_args(&args.zenoh)?;
     let common = |name: ServiceName| {
         let mut common = CommonArgs::for_camera(args.zenoh.clone(), &args.camera);

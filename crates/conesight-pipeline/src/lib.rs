@@ -19,6 +19,8 @@
 //! - [`boxes`]: given boxes (YOLO txt, KITTI labels) for judging keypoints + PnP alone.
 //! - [`in_process`]: [`InProcessPipeline`], every stage chained in one thread.
 //! - [`stats`]: percentiles and summaries for tables.
+//! - [`gate`]: [`gate::InputGate`], the checks every input's header passes (camera, stamps,
+//!   sequence gaps).
 //! - [`node`]: what a service on the bus shares (session, metrics, readiness, shutdown).
 //! - `error`: [`PipelineError`], the error enum.
 //!
@@ -27,6 +29,7 @@
 pub mod boxes;
 pub mod detector_stage;
 pub mod error;
+pub mod gate;
 pub mod in_process;
 pub mod keypoint_stage;
 pub mod localiser_stage;

@@ -19,10 +19,13 @@ use conesight_bus::{
     Topics, ZenohArgs, declare_callback_subscriber, decode_with_limit, open_session,
 };
 use conesight_core::{Camera, Extrinsics};
+use conesight_proto::peek_header;
 use conesight_service::{
     ErrorReporter, HttpArgs, HttpState, Metrics, Readiness, Worker, router, serve,
 };
 use tokio::sync::watch;
+
+use crate::gate::InputGate;
 
 /// Default largest accepted message, MiB (a 4096x4096 raw frame fits).
 pub const DEFAULT_MAX_MESSAGE_MB: usize = 64;
@@ -44,7 +47,17 @@ pub struct CommonArgs {
     /// Largest accepted message, MiB; larger ones are counted as `oversize` and dropped.
     #[arg(long = "max-message-mb", env = "CONESIGHT_MAX_MESSAGE_MB", default_value_t = DEFAULT_MAX_MESSAGE_MB)]
     pub max_message_mb: usize,
+    /// Inputs acquired longer ago than this are dropped as stale (`stale_input`), ms; 0 turns
+    /// the check off.
+    #[arg(long = "max-input-age-ms", env = "CONESIGHT_MAX_INPUT_AGE_MS", default_value_t = DEFAULT_MAX_INPUT_AGE_MS)]
+    pub max_input_age_ms: u64,
 }
+
+/// How far over `--max-message-mb` Zenoh still delivers a message (so the service counts it).
+pub const ZENOH_RX_HEADROOM_BYTES: usize = 16 << 20;
+
+/// Default of `--max-input-age-ms` ([`crate::gate::DEFAULT_MAX_AGE`]).
+pub const DEFAULT_MAX_INPUT_AGE_MS: u64 = 2_000;
 
 impl CommonArgs {
     /// Defaults for in-process use and tests: camera `front`, HTTP on a free loopback port.
@@ -56,12 +69,33 @@ impl CommonArgs {
             },
             camera: camera.to_owned(),
             max_message_mb: DEFAULT_MAX_MESSAGE_MB,
+            max_input_age_ms: DEFAULT_MAX_INPUT_AGE_MS,
         }
+    }
+
+    /// The checks on this service's inputs (`crate::gate`).
+    pub fn input_gate(&self) -> crate::gate::InputGate {
+        let max_age =
+            (self.max_input_age_ms > 0).then(|| Duration::from_millis(self.max_input_age_ms));
+        crate::gate::InputGate::new(&self.camera, max_age)
     }
 
     /// The message size limit in bytes.
     pub fn max_message_bytes(&self) -> usize {
         self.max_message_mb.saturating_mul(1 << 20)
+    }
+
+    /// The Zenoh arguments with Zenoh's own receive limit following `--max-message-mb`: a
+    /// message up to [`ZENOH_RX_HEADROOM_BYTES`] over it still arrives and is counted as
+    /// `oversize` by the service; a larger one is refused by Zenoh, fragment by fragment,
+    /// before it is buffered (Zenoh logs it at trace level only, so it is not counted).
+    pub fn zenoh_with_limits(&self) -> ZenohArgs {
+        let mut zenoh = self.zenoh.clone();
+        zenoh.rx_max_message_bytes = Some(
+            self.max_message_bytes()
+                .saturating_add(ZENOH_RX_HEADROOM_BYTES),
+        );
+        zenoh
     }
 }
 
@@ -188,21 +222,30 @@ impl Node {
         Ok(bound)
     }
 
-    /// Hands every sample of `key` to `worker` straight from Zenoh's receive thread (counted as
-    /// received, marking the input fresh for `/readyz`): no channel or async task in between,
-    /// so a hop costs one thread wake-up. The worker's slot keeps the newest sample. Keep the
-    /// returned subscriber alive for as long as samples should flow.
+    /// Hands every sample of `stream` (on `key`) to `worker` straight from Zenoh's receive
+    /// thread (counted as received, marking the input fresh for `/readyz`): no channel or async
+    /// task in between, so a hop costs one thread wake-up. The worker's slot keeps the newest
+    /// sample. The header is read first (not the rest) and checked by `gate`: a refused one is
+    /// counted and never reaches the worker; sequence gaps are counted as frames lost. A sample
+    /// whose header cannot be read goes on, so the worker's decode reports what is wrong. Keep
+    /// the returned subscriber alive for as long as samples should flow.
     pub async fn feed_worker(
         &self,
         key: KeyExpr<'static>,
+        stream: &'static str,
+        gate: Arc<InputGate>,
         worker: &Worker<Sample>,
     ) -> Result<Subscriber<()>, conesight_bus::BusError> {
         let submitter = worker.submitter();
-        let metrics = self.metrics.clone();
-        let readiness = self.readiness.clone();
+        let node = self.clone();
         declare_callback_subscriber(&self.session, key, move |sample| {
-            metrics.frame_received();
-            readiness.mark_input();
+            if let Ok(header) = peek_header(conesight_bus::payload_buf(sample.payload()))
+                && !gate.admit(&node, stream, &header)
+            {
+                return;
+            }
+            node.metrics.frame_received();
+            node.readiness.mark_input();
             submitter.submit(sample);
         })
         .await
@@ -244,7 +287,7 @@ where
     conesight_service::init_tracing();
     let shutdown = Shutdown::new();
     shutdown.trigger_on_signal();
-    let session = open_session(&args.zenoh)
+    let session = open_session(&args.zenoh_with_limits())
         .await
         .context("opening the Zenoh session")?;
     let topics = Topics::from_args(&args.zenoh)?;
@@ -376,6 +419,7 @@ pub async fn follow_camera_info(
     .await?;
     let node = node.clone();
     let shutdown = shutdown.clone();
+    let camera_id = camera.to_owned();
     tokio::spawn(async move {
         loop {
             tokio::select! {
@@ -385,6 +429,17 @@ pub async fn follow_camera_info(
                     let Some(info) = node.decode::<conesight_proto::pb::CameraInfo>(&sample, CAMERA_INFO_LIMIT_BYTES) else {
                         continue;
                     };
+                    if let Some(header) = &info.header
+                        && header.camera_id != camera_id
+                    {
+                        let error = crate::gate::GateError::WrongCamera {
+                            stream: "camera_info",
+                            expected: camera_id.clone(),
+                            actual: header.camera_id.clone(),
+                        };
+                        node.errors.report(error.kind(), &error);
+                        continue;
+                    }
                     match info.to_core() {
                         Ok((camera, extrinsics)) => {
                             if cell.set(camera, extrinsics) {

@@ -118,6 +118,8 @@ proptest! {
         let message = pb::Keypoints {
             header: Some(pb::Header::new("front", 0, 0, "front_optical")),
             cones: vec![pb::ConeKeypoints { detection: Some(detection), keypoints }],
+            image_width_px: 1920,
+            image_height_px: 1200,
         };
         if let Ok(cones) = message.to_core() {
             for cone in cones {

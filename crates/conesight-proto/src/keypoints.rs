@@ -99,11 +99,13 @@ impl TryFrom<&pb::ConeKeypoints> for ConeKeypoints {
 }
 
 impl pb::Keypoints {
-    /// The keypoints of every detection of one frame.
-    pub fn new(header: pb::Header, cones: &[ConeKeypoints]) -> Self {
+    /// The keypoints of every detection of one frame of `image_size_px` (width, height).
+    pub fn new(header: pb::Header, image_size_px: (u32, u32), cones: &[ConeKeypoints]) -> Self {
         Self {
             header: Some(header),
             cones: cones.iter().map(pb::ConeKeypoints::from).collect(),
+            image_width_px: image_size_px.0,
+            image_height_px: image_size_px.1,
         }
     }
 
@@ -156,7 +158,7 @@ mod tests {
     #[test]
     fn wrong_count_and_bad_values_are_named() {
         let header = pb::Header::new("front", 0, 0, "front_optical");
-        let mut message = pb::Keypoints::new(header, &[keypoints()]);
+        let mut message = pb::Keypoints::new(header, (1920, 1200), &[keypoints()]);
         assert_eq!(message.to_core().unwrap(), vec![keypoints()]);
         message.cones[0].keypoints[5].v_px = f64::INFINITY;
         let error = message.to_core().unwrap_err();

@@ -109,7 +109,7 @@ proptest! {
 
     #[test]
     fn keypoints_round_trip(header in header(), items in prop::collection::vec(keypoints(), 0..10)) {
-        let message = through_bytes(&pb::Keypoints::new(header, &items)).unwrap();
+        let message = through_bytes(&pb::Keypoints::new(header, (1920, 1200), &items)).unwrap();
         let back = message.to_core().unwrap();
         prop_assert_eq!(back.len(), items.len());
         for (back, item) in back.iter().zip(&items) {

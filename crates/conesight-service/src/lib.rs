@@ -31,7 +31,10 @@ pub mod worker;
 pub use errors::ErrorReporter;
 pub use health::{Readiness, ReadinessReport};
 pub use healthcheck::{HealthcheckArgs, HealthcheckError, healthcheck};
-pub use http::{HttpArgs, HttpState, router, serve};
+pub use http::{
+    HEADER_READ_TIMEOUT, HttpArgs, HttpLimits, HttpState, MAX_CONNECTIONS, router, serve,
+    serve_with,
+};
 pub use metrics::Metrics;
 pub use shutdown::shutdown_signal;
 pub use telemetry::{init_tracing, init_tracing_to_file};

@@ -8,6 +8,7 @@
 //! | `conesight_shared_memory_messages_total` | counter | |
 //! | `conesight_shared_memory_published_total` | counter | |
 //! | `conesight_errors_total` | counter | `kind` |
+//! | `conesight_frames_lost_total` | counter | `stream`: gaps in the input's frame sequence |
 //! | `conesight_stage_latency_seconds` | histogram | `stage` |
 //! | `conesight_queue_depth` | gauge | |
 //! | `conesight_detections_masked_total` | counter | (detector) detections dropped in the ego mask |
@@ -54,6 +55,7 @@ pub struct Metrics {
     shared_memory_messages: Counter,
     shared_memory_published: Counter,
     errors: Family<OneLabel, Counter>,
+    frames_lost: Family<OneLabel, Counter>,
     stage_latency: Family<OneLabel, Histogram, fn() -> Histogram>,
     queue_depth: Gauge,
     detections_masked: Counter,
@@ -76,6 +78,7 @@ impl Metrics {
         let shared_memory_messages = Counter::default();
         let shared_memory_published = Counter::default();
         let errors = Family::<OneLabel, Counter>::default();
+        let frames_lost = Family::<OneLabel, Counter>::default();
         let stage_latency = Family::<OneLabel, Histogram, fn() -> Histogram>::new_with_constructor(
             latency_histogram,
         );
@@ -119,6 +122,11 @@ impl Metrics {
         );
         registry.register("errors", "Errors by kind", errors.clone());
         registry.register(
+            "frames_lost",
+            "Frames missing from an input stream (gaps in its frame sequence), by stream",
+            frames_lost.clone(),
+        );
+        registry.register(
             "stage_latency_seconds",
             "Time spent per pipeline stage",
             stage_latency.clone(),
@@ -136,6 +144,7 @@ impl Metrics {
             shared_memory_messages,
             shared_memory_published,
             errors,
+            frames_lost,
             stage_latency,
             queue_depth,
             detections_masked,
@@ -186,6 +195,13 @@ impl Metrics {
     /// Counts one error of `kind` (a short stable name such as `malformed_protobuf`).
     pub fn error(&self, kind: &'static str) {
         self.errors.get_or_create(&[("kind", kind)]).inc();
+    }
+
+    /// Counts `count` frames missing from `stream` (a gap in its frame sequence).
+    pub fn frames_lost(&self, stream: &'static str, count: u64) {
+        self.frames_lost
+            .get_or_create(&[("stream", stream)])
+            .inc_by(count);
     }
 
     /// Records the time spent in `stage` (e.g. `decode`, `inference`, `pnp`, `end_to_end`).

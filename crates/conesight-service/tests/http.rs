@@ -9,7 +9,8 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use conesight_service::{
-    HealthcheckArgs, HealthcheckError, HttpState, Metrics, Readiness, healthcheck, router, serve,
+    HealthcheckArgs, HealthcheckError, HttpLimits, HttpState, Metrics, Readiness, healthcheck,
+    router, serve, serve_with,
 };
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::{TcpListener, TcpStream};
@@ -131,4 +132,77 @@ async fn healthcheck_rejects_non_http_and_times_out() {
         healthcheck(&args).await,
         Err(HealthcheckError::Timeout { .. })
     ));
+}
+
+/// Reads until the server closes the connection (EOF or reset); false if it is still open
+/// after `within`.
+async fn closed_within(stream: &mut TcpStream, within: Duration) -> bool {
+    let mut buffer = [0_u8; 1024];
+    let deadline = tokio::time::Instant::now() + within;
+    loop {
+        match tokio::time::timeout_at(deadline, stream.read(&mut buffer)).await {
+            Err(_) => return false,
+            Ok(Ok(0) | Err(_)) => return true,
+            Ok(Ok(_)) => {}
+        }
+    }
+}
+
+#[tokio::test]
+async fn half_open_and_idle_connections_are_closed_and_capped() {
+    let listener = TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let addr = listener.local_addr().unwrap();
+    let limits = HttpLimits {
+        header_read_timeout: Duration::from_millis(500),
+        max_connections: 8,
+    };
+    let state = HttpState {
+        readiness: Arc::new(Readiness::new(None)),
+        metrics: Arc::new(Metrics::new()),
+    };
+    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+    let server = tokio::spawn(serve_with(listener, router(state), limits, async {
+        let _ = stopped.await;
+    }));
+
+    // 40 clients that connect and send nothing, or half a request line: more than the cap.
+    let mut silent = Vec::new();
+    for index in 0..40 {
+        let mut stream = TcpStream::connect(addr).await.unwrap();
+        if index % 2 == 1 {
+            stream
+                .write_all(b"GET /metrics HTTP/1.1\r\nHo")
+                .await
+                .unwrap();
+        }
+        silent.push(stream);
+    }
+    // A generous bound (the timeout is 0.5 s): every one is closed by the server.
+    for (index, stream) in silent.iter_mut().enumerate() {
+        assert!(
+            closed_within(stream, Duration::from_secs(10)).await,
+            "connection {index} still open"
+        );
+    }
+
+    // A kept-alive connection that goes idle after its answer is closed too.
+    let mut idle = TcpStream::connect(addr).await.unwrap();
+    idle.write_all(b"GET /livez HTTP/1.1\r\nHost: test\r\n\r\n")
+        .await
+        .unwrap();
+    let mut first = [0_u8; 512];
+    let read = idle.read(&mut first).await.unwrap();
+    assert!(first[..read].starts_with(b"HTTP/1.1 200"));
+    assert!(closed_within(&mut idle, Duration::from_secs(10)).await);
+
+    // The slots are free again: a normal request is answered.
+    let livez = raw_get(addr, "/livez").await;
+    assert!(livez.starts_with("HTTP/1.1 200"), "{livez}");
+
+    stop.send(()).unwrap();
+    tokio::time::timeout(Duration::from_secs(10), server)
+        .await
+        .unwrap()
+        .unwrap()
+        .unwrap();
 }

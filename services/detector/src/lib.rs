@@ -12,6 +12,7 @@
 //! Entry point: [`run`].
 
 use std::path::PathBuf;
+use std::sync::Arc;
 use std::time::Instant;
 
 use conesight_bus::zenoh::Wait;
@@ -77,6 +78,8 @@ pub async fn run(args: &DetectorArgs, node: Node, shutdown: Shutdown) -> anyhow:
     let publisher =
         declare_publisher(&node.session, &node.topics, camera, Stream::Detections).await?;
     let limit = args.common.max_message_bytes();
+    let gate = Arc::new(args.common.input_gate());
+    let worker_gate = gate.clone();
     let worker_node = node.clone();
     let worker = Worker::spawn("detector", node.metrics.clone(), move |sample: Sample| {
         let node = &worker_node;
@@ -122,6 +125,10 @@ pub async fn run(args: &DetectorArgs, node: Node, shutdown: Shutdown) -> anyhow:
         }
         node.metrics.detections_masked(output.masked as u64);
         let detections = output.detections;
+        // A frame that waited out a stall is not published late.
+        if !worker_gate.still_fresh(node, "frame", &header) {
+            return;
+        }
         let mut header = header;
         header.stamp_publish();
         let message = pb::Detections::new(header, &detections);
@@ -136,7 +143,12 @@ pub async fn run(args: &DetectorArgs, node: Node, shutdown: Shutdown) -> anyhow:
     })?;
     // Frames go from Zenoh's receive thread straight into the worker's slot (newest wins).
     let frames = node
-        .feed_worker(node.topics.key(camera, Stream::Frame)?, &worker)
+        .feed_worker(
+            node.topics.key(camera, Stream::Frame)?,
+            "frame",
+            gate,
+            &worker,
+        )
         .await?;
     // Ready for input only now: the model is loaded and the subscriber is declared.
     node.readiness.set_model_loaded(true);

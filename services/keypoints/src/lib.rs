@@ -28,6 +28,7 @@ use conesight_bus::zenoh::Wait;
 use conesight_bus::zenoh::sample::Sample;
 use conesight_bus::{Stream, declare_callback_subscriber, declare_publisher, encode};
 use conesight_onnx::ModelOptions;
+use conesight_pipeline::gate::InputGate;
 use conesight_pipeline::keypoint_stage::DEFAULT_MAX_CONES_PER_FRAME;
 use conesight_pipeline::node::CommonArgs;
 use conesight_pipeline::{KeypointStage, Node, Shutdown};
@@ -98,6 +99,8 @@ pub async fn run(args: &KeypointsArgs, node: Node, shutdown: Shutdown) -> anyhow
     let publisher =
         declare_publisher(&node.session, &node.topics, camera, Stream::Keypoints).await?;
     let limit = args.common.max_message_bytes();
+    let gate = Arc::new(args.common.input_gate());
+    let worker_gate = gate.clone();
     let worker_node = node.clone();
     let worker = Worker::spawn(
         "keypoints",
@@ -151,9 +154,14 @@ pub async fn run(args: &KeypointsArgs, node: Node, shutdown: Shutdown) -> anyhow
                     ),
                 );
             }
+            // A pair that waited out a stall is not published late.
+            if !worker_gate.still_fresh(node, "detections", &header) {
+                return;
+            }
             let mut header = header;
             header.stamp_publish();
-            let message = pb::Keypoints::new(header, &output.cones);
+            let message =
+                pb::Keypoints::new(header, (image.width(), image.height()), &output.cones);
             match publisher.put(encode(&message)).wait() {
                 Ok(()) => node.metrics.frame_processed(),
                 Err(error) => {
@@ -170,6 +178,7 @@ pub async fn run(args: &KeypointsArgs, node: Node, shutdown: Shutdown) -> anyhow
         pairing: Mutex::new(Pairing::new(args.pair_cache)),
         submitter: worker.submitter(),
         limit,
+        gate: gate.clone(),
     });
     let frames = {
         let feed = feed.clone();
@@ -206,6 +215,7 @@ struct PairFeed {
     pairing: Mutex<Pairing<Sample, pb::Detections>>,
     submitter: Submitter<(Sample, pb::Detections)>,
     limit: usize,
+    gate: Arc<InputGate>,
 }
 
 impl PairFeed {
@@ -228,6 +238,9 @@ impl PairFeed {
                 return;
             }
         };
+        if !self.gate.admit(node, "frame", &header) {
+            return;
+        }
         let key = (header.frame_sequence, header.acquisition_time_ns);
         let pair = self.pairing().add_frame(key, sample);
         if let Some(pair) = pair {
@@ -243,6 +256,7 @@ impl PairFeed {
             return;
         };
         let key = match require_header(&message.header) {
+            Ok(header) if !self.gate.admit(node, "detections", header) => return,
             Ok(header) => (header.frame_sequence, header.acquisition_time_ns),
             Err(error) => {
                 node.metrics.frame_dropped();

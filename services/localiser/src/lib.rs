@@ -64,9 +64,12 @@ pub async fn run(args: &LocaliserArgs, node: Node, shutdown: Shutdown) -> anyhow
     let publisher = declare_publisher(&node.session, &node.topics, camera, Stream::Cones).await?;
     let limit = args.common.max_message_bytes().min(KEYPOINTS_LIMIT_BYTES);
     let ground_plane = args.ground_plane;
+    let gate = Arc::new(args.common.input_gate());
+    let worker_gate = gate.clone();
     let worker_node = node.clone();
     let mut seen_calibration = 0_u64;
     let mut stage: Option<LocaliserStage> = None;
+    let mut calibrated_size_px = (0_u32, 0_u32);
     let mut missing_extrinsics = false;
     let worker = Worker::spawn("localiser", node.metrics.clone(), move |sample: Sample| {
         let node = &worker_node;
@@ -88,6 +91,7 @@ pub async fn run(args: &LocaliserArgs, node: Node, shutdown: Shutdown) -> anyhow
         if let Some((camera, extrinsics)) = calibration.newer(&mut seen_calibration) {
             let extrinsics = fixed_extrinsics.or(extrinsics);
             missing_extrinsics = extrinsics.is_none();
+            calibrated_size_px = (camera.width_px, camera.height_px);
             match LocaliserStage::new(
                 &camera,
                 &extrinsics.unwrap_or_else(Extrinsics::paper_default),
@@ -108,6 +112,19 @@ pub async fn run(args: &LocaliserArgs, node: Node, shutdown: Shutdown) -> anyhow
             );
             return;
         };
+        let frame_size_px = (message.image_width_px, message.image_height_px);
+        if frame_size_px != calibrated_size_px {
+            node.metrics.frame_dropped();
+            node.errors.report(
+                "frame_size_mismatch",
+                &format!(
+                    "keypoints of a {}x{} frame, but camera_info is for {}x{}; publish frames at \
+                     the calibrated size or a camera_info for this size",
+                    frame_size_px.0, frame_size_px.1, calibrated_size_px.0, calibrated_size_px.1
+                ),
+            );
+            return;
+        }
         if missing_extrinsics {
             node.errors.report(
                 "no_extrinsics",
@@ -120,6 +137,10 @@ pub async fn run(args: &LocaliserArgs, node: Node, shutdown: Shutdown) -> anyhow
         for (index, error) in &output.failed {
             node.errors
                 .report("pnp_failed", &format!("cone {index}: {error}"));
+        }
+        // Keypoints that waited out a stall give no cones: the car has moved on.
+        if !worker_gate.still_fresh(node, "keypoints", &header) {
+            return;
         }
         let located: Vec<_> = output.cones.into_iter().map(|(_, cone)| cone).collect();
         let message = pb::Cones::new_stamped(header, &located);
@@ -135,7 +156,12 @@ pub async fn run(args: &LocaliserArgs, node: Node, shutdown: Shutdown) -> anyhow
     })?;
     // Keypoints go from Zenoh's receive thread straight into the worker's slot.
     let keypoints = node
-        .feed_worker(node.topics.key(camera, Stream::Keypoints)?, &worker)
+        .feed_worker(
+            node.topics.key(camera, Stream::Keypoints)?,
+            "keypoints",
+            gate,
+            &worker,
+        )
         .await?;
     // Ready for input only now: the subscribers are declared.
     node.readiness.set_model_loaded(true);

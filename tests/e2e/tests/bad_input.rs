@@ -94,7 +94,11 @@ async fn bad_input_is_counted_by_kind_and_survived() {
         observation: conesight_core::ConeObservation::new([nalgebra_point(); 7]),
     };
     keypoints
-        .put(encode(&pb::Keypoints::new(header(1), &[early])))
+        .put(encode(&pb::Keypoints::new(
+            header(1),
+            (1920, 1200),
+            &[early],
+        )))
         .wait()
         .unwrap();
     pause().await;
@@ -144,7 +148,7 @@ async fn bad_input_is_counted_by_kind_and_survived() {
         tokio::time::sleep(Duration::from_millis(1500)).await;
     }
     // Keypoints with infinity.
-    let mut inf = pb::Keypoints::new(header(7), &[early]);
+    let mut inf = pb::Keypoints::new(header(7), (1920, 1200), &[early]);
     inf.cones[0].keypoints[2].u_px = f64::INFINITY;
     keypoints.put(encode(&inf)).wait().unwrap();
     pause().await;
