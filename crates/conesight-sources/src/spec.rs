@@ -65,7 +65,7 @@ impl FromStr for SourceSpec {
             ("synthetic", None) => Ok(Self::Synthetic),
             ("synthetic", Some(_)) => Err(invalid("`synthetic` takes no argument")),
             ("folder", None) => Ok(Self::Folder(None)),
-            ("folder", Some(dir)) if dir.is_empty() => Err(invalid("`folder:` needs a directory")),
+            ("folder", Some("")) => Err(invalid("`folder:` needs a directory")),
             ("folder", Some(dir)) => Ok(Self::Folder(Some(PathBuf::from(dir)))),
             ("video", Some(path)) if !path.trim().is_empty() => {
                 Ok(Self::Video(PathBuf::from(path)))
