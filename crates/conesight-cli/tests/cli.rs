@@ -494,11 +494,12 @@ fn frames_with_cones(stdout: &str) -> u64 {
         .unwrap_or_else(|| panic!("no summary line in\n{stdout}"))
 }
 
-/// `conesight run` on live GStreamer sources: a `videotestsrc` pipeline that ends every 12
-/// frames (reported as `source_ended` and restarted, the run goes on to its 30 frames) and a
+/// `conesight run` on live GStreamer sources: a `videotestsrc` pipeline that ends every 8
+/// frames (reported as `source_ended` and restarted, the run goes on to its 20 frames) and a
 /// video file made here with `gst-launch-1.0` (`jpegenc ! avimux`, Debian's plugins-good),
 /// played to its end. The test pattern shows no cones, so what is checked is that a cones
-/// message arrives per frame (the localiser publishes one even when it is empty).
+/// message arrives for the frames (the localiser publishes one even when it is empty; under
+/// load the stages skip to the newest frame, so not for every one).
 #[test]
 fn run_on_a_gstreamer_pipeline_and_a_video_file_gives_cones_messages() {
     let dir = TempDir::new("run-gst");
@@ -506,7 +507,7 @@ fn run_on_a_gstreamer_pipeline_and_a_video_file_gives_cones_messages() {
     camera_yaml(&camera, 320, 240);
     let out = dir.0.join("out");
     let pipeline =
-        "gst:videotestsrc num-buffers=12 ! video/x-raw,width=320,height=240,framerate=20/1";
+        "gst:videotestsrc num-buffers=8 ! video/x-raw,width=320,height=240,framerate=10/1";
     let output = conesight(&[
         "run",
         "--source",
@@ -514,7 +515,7 @@ fn run_on_a_gstreamer_pipeline_and_a_video_file_gives_cones_messages() {
         "--camera-info",
         camera.to_str().unwrap(),
         "--frames",
-        "30",
+        "20",
         "--onnx-threads",
         "1",
         "--out",
@@ -526,8 +527,8 @@ fn run_on_a_gstreamer_pipeline_and_a_video_file_gives_cones_messages() {
     assert!(stdout.contains("source: gst:videotestsrc"), "{stdout}");
     let with_cones = frames_with_cones(&stdout);
     assert!(
-        with_cones >= 10,
-        "{with_cones} cones messages of 30 frames:\n{stdout}"
+        with_cones >= 4,
+        "{with_cones} cones messages of 20 frames:\n{stdout}"
     );
     assert!(
         stderr.contains("source_ended"),
@@ -539,9 +540,9 @@ fn run_on_a_gstreamer_pipeline_and_a_video_file_gives_cones_messages() {
         .args([
             "-q",
             "videotestsrc",
-            "num-buffers=30",
+            "num-buffers=20",
             "!",
-            "video/x-raw,width=320,height=240,framerate=30/1",
+            "video/x-raw,width=320,height=240,framerate=10/1",
             "!",
             "jpegenc",
             "!",
@@ -571,8 +572,8 @@ fn run_on_a_gstreamer_pipeline_and_a_video_file_gives_cones_messages() {
     let stdout = String::from_utf8_lossy(&output.stdout);
     let with_cones = frames_with_cones(&stdout);
     assert!(
-        with_cones >= 10,
-        "{with_cones} cones messages of the video's 30 frames:\n{stdout}"
+        with_cones >= 4,
+        "{with_cones} cones messages of the video's 20 frames:\n{stdout}"
     );
 }
 
