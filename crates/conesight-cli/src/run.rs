@@ -183,7 +183,8 @@ async fn run_async(args: RunArgs) -> anyhow::Result<()> {
     if has(ServiceName::Camera) {
         if !use_detector && !matches!(args.source, SourceSpec::Synthetic | SourceSpec::Folder(_)) {
             anyhow::bail!(
-                "--boxes truth needs the renderer's boxes (--source synthetic) or a folder's label                  files; --source {} has none",
+                "--boxes truth needs the renderer's boxes (--source synthetic) or a folder's label \
+                 files; --source {} has none",
                 args.source
             );
         }
@@ -195,7 +196,9 @@ async fn run_async(args: RunArgs) -> anyhow::Result<()> {
         }
         println!("source: {}", args.source);
     }
-    if has(ServiceName::Camera) && !use_detector {
+    if has(ServiceName::Camera) && !use_detector && !synthetic {
+        println!("boxes: the label files next to the images (--boxes truth)");
+    } else if has(ServiceName::Camera) && !use_detector {
         println!(
             "boxes: the renderer's exact boxes (no detector model at {}; pass --boxes detector \
              --detector PATH to use one)",
