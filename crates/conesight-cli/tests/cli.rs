@@ -578,7 +578,7 @@ fn run_on_a_gstreamer_pipeline_and_a_video_file_gives_cones_messages() {
 }
 
 /// A camera source without calibration is an error naming `--camera-info`, before anything
-/// starts.
+/// starts; so are an unknown source and the renderer's boxes asked of a camera.
 #[test]
 fn run_on_a_camera_needs_its_calibration() {
     let dir = TempDir::new("run-gst-calibration");
@@ -597,4 +597,16 @@ fn run_on_a_camera_needs_its_calibration() {
     assert!(!output.status.success());
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(stderr.contains("gst:PIPELINE"), "{stderr}");
+    let output = conesight(&[
+        "run",
+        "--source",
+        "gst:videotestsrc",
+        "--boxes",
+        "truth",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!output.status.success());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(stderr.contains("--boxes truth needs"), "{stderr}");
 }
