@@ -506,8 +506,7 @@ fn run_on_a_gstreamer_pipeline_and_a_video_file_gives_cones_messages() {
     let camera = dir.0.join("camera.yaml");
     camera_yaml(&camera, 320, 240);
     let out = dir.0.join("out");
-    let pipeline =
-        "gst:videotestsrc num-buffers=8 ! video/x-raw,width=320,height=240,framerate=10/1";
+    let pipeline = "gst:videotestsrc is-live=true num-buffers=8 ! video/x-raw,width=320,height=240,framerate=10/1";
     let output = conesight(&[
         "run",
         "--source",

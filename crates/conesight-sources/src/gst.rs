@@ -3,7 +3,10 @@
 //!
 //! The pipeline is the user's description followed by `videoconvert ! video/x-raw,format=RGB !
 //! appsink` (a video file: `filesrc ! decodebin` before it). The appsink keeps one buffer and
-//! drops older ones, so a slow publisher takes the newest frame. Each frame is copied out of
+//! drops older ones, so a slow publisher takes the newest frame; a camera's frames are taken
+//! as they arrive, a video file's when the pipeline clock reaches them (it plays at its own
+//! rate), so a non-live element in a `gst:` pipeline (`videotestsrc`, `filesrc`) runs as fast as
+//! it can unless it is made live (`videotestsrc is-live=true`). Each frame is copied out of
 //! its buffer row by row through `gstreamer_video::VideoFrame` (RGB rows are padded to 4
 //! bytes, so an odd width has a stride larger than `3 * width`).
 //!
@@ -30,10 +33,12 @@ use crate::{Calibration, CameraFrame, FrameSource, Next, Pacing, SourceError};
 const SINK_NAME: &str = "conesight_sink";
 /// Name of a video file's `filesrc`.
 const FILE_NAME: &str = "conesight_file";
-/// What follows every pipeline: RGB frames into an appsink that keeps the newest one, synced
-/// to the pipeline clock (a video file plays at its own rate).
+/// What follows every pipeline: RGB frames into an appsink that keeps the newest one. A
+/// camera's appsink takes each frame as soon as it is there (`sync=false`: a live source
+/// delivers at its own rate and waiting for the clock would only add latency); a video
+/// file's waits for the clock, so it plays at its own rate.
 const SINK_TAIL: &str = "videoconvert ! video/x-raw,format=RGB ! \
-                         appsink name=conesight_sink max-buffers=1 drop=true sync=true";
+                         appsink name=conesight_sink max-buffers=1 drop=true";
 /// Reference time stamp caps of Unix (wall clock) time.
 const UNIX_REFERENCE: &str = "timestamp/x-unix";
 
@@ -87,7 +92,7 @@ impl GstSource {
     pub fn pipeline(pipeline: &str, calibration: Calibration) -> Result<Self, SourceError> {
         let source = Self {
             input: Input::Pipeline(pipeline.to_owned()),
-            description: format!("{pipeline} ! {SINK_TAIL}"),
+            description: format!("{pipeline} ! {SINK_TAIL} sync=false"),
             calibration,
             running: None,
             frames: 0,
@@ -109,7 +114,7 @@ impl GstSource {
                 path: path.to_path_buf(),
                 looped,
             },
-            description: format!("filesrc name={FILE_NAME} ! decodebin ! {SINK_TAIL}"),
+            description: format!("filesrc name={FILE_NAME} ! decodebin ! {SINK_TAIL} sync=true"),
             calibration,
             running: None,
             frames: 0,

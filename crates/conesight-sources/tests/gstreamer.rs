@@ -1,4 +1,4 @@
-//! The GStreamer sources on real pipelines (no mocks): `videotestsrc` at an odd frame size (RGB
+//! The GStreamer sources on real pipelines (no mocks): a live `videotestsrc` at an odd frame size (RGB
 //! rows padded to 4 bytes), its end of stream, time stamps from the buffers, a video file made
 //! here (`jpegenc ! avimux`, from the Debian plugins `scripts/setup.sh` installs) played to its
 //! end and looped, and the errors a user meets first.
@@ -46,7 +46,7 @@ fn drain(source: &mut dyn FrameSource, limit: usize) -> (Vec<CameraFrame>, Optio
 fn videotestsrc_frames_have_their_pixels_at_an_odd_width_and_buffer_stamps() {
     // 321 px: an RGB row is 963 bytes, padded to a stride of 964.
     let mut source = GstSource::pipeline(
-        "videotestsrc num-buffers=6 pattern=solid-color foreground-color=0xff102030 ! \
+        "videotestsrc is-live=true num-buffers=6 pattern=solid-color foreground-color=0xff102030 ! \
          video/x-raw,format=RGB,width=321,height=241,framerate=30/1",
         calibration(321, 241),
     )
@@ -54,7 +54,7 @@ fn videotestsrc_frames_have_their_pixels_at_an_odd_width_and_buffer_stamps() {
     assert!(
         source
             .description()
-            .ends_with("appsink name=conesight_sink max-buffers=1 drop=true sync=true")
+            .ends_with("appsink name=conesight_sink max-buffers=1 drop=true sync=false")
     );
     let started_ns = conesight_proto::now_ns();
     source.start().unwrap();
@@ -105,7 +105,7 @@ fn videotestsrc_frames_have_their_pixels_at_an_odd_width_and_buffer_stamps() {
 #[test]
 fn other_formats_are_converted_to_rgb() {
     let mut source = GstSource::pipeline(
-        "videotestsrc num-buffers=2 pattern=white ! video/x-raw,format=I420,width=64,height=48",
+        "videotestsrc is-live=true num-buffers=2 pattern=white ! video/x-raw,format=I420,width=64,height=48",
         calibration(64, 48),
     )
     .unwrap();
@@ -185,7 +185,7 @@ fn first_errors_name_what_is_wrong() {
 
     // A frame of another size than the calibration's names both.
     let mut source = GstSource::pipeline(
-        "videotestsrc num-buffers=1 ! video/x-raw,width=64,height=48",
+        "videotestsrc is-live=true num-buffers=1 ! video/x-raw,width=64,height=48",
         calibration(1920, 1200),
     )
     .unwrap();

@@ -89,7 +89,7 @@ impl Running {
 async fn frames_of_another_size_are_reported_with_both_sizes_and_retried() {
     let camera = Running::start(
         "camera-size",
-        "gst:videotestsrc ! video/x-raw,width=320,height=240",
+        "gst:videotestsrc is-live=true ! video/x-raw,width=320,height=240",
         640,
         480,
     )

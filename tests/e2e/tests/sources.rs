@@ -37,7 +37,7 @@ async fn a_gstreamer_camera_that_ends_is_restarted_and_its_frames_give_cones() {
         detector.display()
     );
     let pipeline = format!(
-        "gst:videotestsrc num-buffers={RUN_FRAMES} ! video/x-raw,width=320,height=240,framerate=15/1"
+        "gst:videotestsrc is-live=true num-buffers={RUN_FRAMES} ! video/x-raw,width=320,height=240,framerate=15/1"
     );
     let camera = vec![
         "--source".to_owned(),
