@@ -84,9 +84,14 @@ if [[ "$arch" != "$host_arch" ]]; then
     foreign=(--foreign)
 fi
 
+# The camera service and the CLI link GStreamer (camera sources `gst:` and `video:`): its
+# libraries and the base and good plugins (v4l2src, videoconvert, decodebin, jpegdec, ...) at
+# run time; the -dev packages stay on the build host (scripts/setup.sh).
+runtime_packages="libgstreamer1.0-0,libgstreamer-plugins-base1.0-0,gstreamer1.0-plugins-base,gstreamer1.0-plugins-good"
+
 echo "build-base.sh: debootstrap $release ($arch, minbase) into $rootfs"
 "${SUDO[@]}" debootstrap --variant=minbase --arch="$arch" "${foreign[@]}" \
-    "$release" "$rootfs" "$mirror"
+    --include="$runtime_packages" "$release" "$rootfs" "$mirror"
 
 if [[ ${#foreign[@]} -gt 0 ]]; then
     qemu="/usr/bin/qemu-$(case "$arch" in arm64) echo aarch64 ;; *) echo "$arch" ;; esac)-static"

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Installs what conesight needs on a fresh machine, idempotently, into build/.
 #
-#   scripts/setup.sh runtime   what running needs (`make demo`, `make images`): Debian packages,
+#   scripts/setup.sh runtime   what running needs (`make demo`, `make images`): Debian packages
+#                              (GStreamer with its base and good plugins among them),
 #                              build/onnxruntime/libonnxruntime.so.1.31.1 (ONNX Runtime for `ort`,
 #                              load-dynamic, taken from the PyPI wheel onnxruntime==1.31.1) and an
 #                              empty build/venv whose pip fetches that wheel. No PyTorch.
@@ -35,6 +36,20 @@ log() { printf '[setup] %s\n' "$*"; }
 need_apt=()
 command -v unzip >/dev/null 2>&1 || need_apt+=(unzip)
 "$PYTHON" -c 'import venv, ensurepip' >/dev/null 2>&1 || need_apt+=(python3-venv)
+# GStreamer, for the camera sources `gst:PIPELINE` and `video:PATH` (the camera service and the
+# CLI link it): headers and pkg-config to build, the base and good plugins to run (videotestsrc,
+# videoconvert, decodebin, v4l2src, jpegdec, avidemux, ...), gst-launch-1.0 for the tests and for
+# trying a camera pipeline by hand.
+GST_PACKAGES=(pkg-config libgstreamer1.0-dev libgstreamer-plugins-base1.0-dev
+  gstreamer1.0-plugins-base gstreamer1.0-plugins-good gstreamer1.0-tools)
+if command -v dpkg-query >/dev/null 2>&1; then
+  for pkg in "${GST_PACKAGES[@]}"; do
+    dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q 'install ok installed' || need_apt+=("$pkg")
+  done
+elif ! pkg-config --exists gstreamer-app-1.0 gstreamer-video-1.0 2>/dev/null \
+  || ! command -v gst-launch-1.0 >/dev/null 2>&1; then
+  need_apt+=("${GST_PACKAGES[@]}")
+fi
 if [ ${#need_apt[@]} -gt 0 ]; then
   if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
     log "installing Debian packages: ${need_apt[*]}"

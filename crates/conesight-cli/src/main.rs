@@ -32,7 +32,8 @@ struct Cli {
 #[derive(Debug, Subcommand)]
 enum Command {
     /// The pipeline: camera, detector, keypoints and localiser services in one process over an
-    /// embedded Zenoh session, on a synthetic sequence; live table against ground truth, PNGs.
+    /// embedded Zenoh session, on a synthetic sequence (live table against ground truth, PNGs)
+    /// or a camera (`--source gst:PIPELINE | video:PATH | folder:DIR --camera-info FILE`).
     Run(run::RunArgs),
     /// The pipeline in-process on image files: one JSON object per image on stdout.
     Predict(predict::PredictArgs),

@@ -1,7 +1,9 @@
 //! `conesight run`: the camera, detector, keypoints and localiser services in one process over
-//! one embedded Zenoh peer session (no router), on a synthetic sequence with the shipped
-//! models; a live table against ground truth; annotated frames and a bird's-eye view as PNGs.
-//! `--services` runs a subset, so the same binary serves a split deployment.
+//! one embedded Zenoh peer session (no router), with the shipped models, on a synthetic
+//! sequence (a live table against ground truth; annotated frames and a bird's-eye view as
+//! PNGs) or any other source of the camera service (`--source folder:DIR | video:PATH |
+//! gst:PIPELINE` with `--camera-info FILE`: the live table without truth). `--services` runs a
+//! subset, so the same binary serves a split deployment.
 
 use std::collections::BTreeMap;
 use std::io::IsTerminal;
@@ -12,7 +14,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use conesight_bus::{Stream, Topics, ZenohArgs, declare_subscriber, decode, open_session};
-use conesight_camera_service::{CameraArgs, CameraFrame, Frames, load_frames};
+use conesight_camera_service::{CameraArgs, CameraFrame, load_source};
 use conesight_detector_service::DetectorArgs;
 use conesight_keypoints_service::KeypointsArgs;
 use conesight_localiser_service::LocaliserArgs;
@@ -22,6 +24,7 @@ use conesight_pipeline::{Node, Shutdown, locate_detector, match_cones};
 use conesight_proto::{ConeKeypoints, LocatedCone, now_ns, pb};
 use conesight_service::Readiness;
 use conesight_sim::frames::Layout;
+use conesight_sources::{SourceError, SourceSpec};
 use image::Rgb;
 
 use crate::bev::{BevCone, class_colour, disc, line, write_bev_png};
@@ -62,12 +65,28 @@ pub struct RunArgs {
     /// Camera id (key chunk).
     #[arg(long, default_value = "front")]
     camera: String,
-    /// Stop after this many frames (0: run until Ctrl-C).
+    /// Stop after this many frames (0: run until Ctrl-C, or until a video file ends).
     #[arg(long, default_value_t = 100)]
     frames: u64,
-    /// Camera rate, frames per second (0: as fast as the pipeline takes them).
+    /// Camera rate of synthetic and folder sources, frames per second (0: as fast as the
+    /// pipeline takes them); GStreamer sources go at their own rate.
     #[arg(long = "rate-hz", default_value_t = 10.0)]
     rate_hz: f64,
+    /// Frame source: `synthetic` (rendered, with exact truth), `folder:DIR`, `video:PATH` or
+    /// `gst:PIPELINE` (a GStreamer pipeline without its sink, e.g. `gst:v4l2src
+    /// device=/dev/video0`); every one but `synthetic` needs `--camera-info`.
+    #[arg(long, default_value = "synthetic", value_parser = parse_source)]
+    source: SourceSpec,
+    /// Calibration of the camera of a non-synthetic source: ROS camera_info, OpenCV
+    /// FileStorage or Kalibr camchain YAML; frames of another size are an error.
+    #[arg(long = "camera-info")]
+    camera_info: Option<PathBuf>,
+    /// Extrinsics YAML of that camera (`vehicle_from_camera`; default: 1 m high, level).
+    #[arg(long)]
+    extrinsics: Option<PathBuf>,
+    /// With `--source video:PATH`: play the file again at its end (else the run ends there).
+    #[arg(long = "source-loop")]
+    source_loop: bool,
     /// Seed of the synthetic sequence.
     #[arg(long, default_value_t = 7)]
     seed: u64,
@@ -121,6 +140,10 @@ const ANNOTATE_EVERY: u64 = 25;
 /// After the camera's last frame, wait this long for the pipeline to drain.
 const DRAIN_TIMEOUT: Duration = Duration::from_secs(3);
 
+fn parse_source(text: &str) -> Result<SourceSpec, String> {
+    text.parse().map_err(|e: SourceError| e.to_string())
+}
+
 /// Runs `conesight run`.
 pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let runtime = tokio::runtime::Builder::new_multi_thread()
@@ -151,12 +174,31 @@ async fn run_async(args: RunArgs) -> anyhow::Result<()> {
     shutdown.trigger_on_signal();
     let has = |s: ServiceName| args.services.contains(&s);
     let detector_path = locate_detector(args.detector.as_deref());
+    let synthetic = args.source == SourceSpec::Synthetic;
     let use_detector = match args.boxes {
         BoxSource::Detector => true,
         BoxSource::Truth => false,
-        BoxSource::Auto => detector_path.is_file(),
+        BoxSource::Auto => detector_path.is_file() || !synthetic,
     };
-    if has(ServiceName::Camera) && !use_detector {
+    if has(ServiceName::Camera) {
+        if !use_detector && !matches!(args.source, SourceSpec::Synthetic | SourceSpec::Folder(_)) {
+            anyhow::bail!(
+                "--boxes truth needs the renderer's boxes (--source synthetic) or a folder's label \
+                 files; --source {} has none",
+                args.source
+            );
+        }
+        if args.source.needs_calibration() && args.camera_info.is_none() {
+            return Err(SourceError::MissingCalibration {
+                spec: args.source.to_string(),
+            }
+            .into());
+        }
+        println!("source: {}", args.source);
+    }
+    if has(ServiceName::Camera) && !use_detector && !synthetic {
+        println!("boxes: the label files next to the images (--boxes truth)");
+    } else if has(ServiceName::Camera) && !use_detector {
         println!(
             "boxes: the renderer's exact boxes (no detector model at {}; pass --boxes detector \
              --detector PATH to use one)",
@@ -185,6 +227,10 @@ async fn run_async(args: RunArgs) -> anyhow::Result<()> {
     camera_args.rate_hz = args.rate_hz;
     camera_args.frames = args.frames;
     camera_args.publish_boxes = !use_detector;
+    camera_args.source = args.source.clone();
+    camera_args.camera_info = args.camera_info.clone();
+    camera_args.extrinsics = args.extrinsics.clone();
+    camera_args.source_loop = args.source_loop;
 
     let mut tasks: Vec<(ServiceName, Task)> = Vec::new();
     let camera_done = Arc::new(AtomicBool::new(false));
@@ -249,10 +295,8 @@ async fn run_async(args: RunArgs) -> anyhow::Result<()> {
         tasks.push((name, task));
     }
     if has(ServiceName::Camera) {
-        let frames = load_frames(&camera_args, true).await?;
-        if let Frames::Preloaded(frames) = &frames {
-            preloaded = Some(frames.clone());
-        }
+        let source = load_source(&camera_args, true).await?;
+        preloaded = source.known_frames();
         let (name, node) = start_node(ServiceName::Camera, "camera", None);
         if args.http_base_port.is_some() {
             let addr = node
@@ -268,7 +312,7 @@ async fn run_async(args: RunArgs) -> anyhow::Result<()> {
             name,
             tokio::spawn(async move {
                 let result =
-                    conesight_camera_service::run(&camera_args, frames, node, shutdown).await;
+                    conesight_camera_service::run(&camera_args, source, node, shutdown).await;
                 done.store(true, Ordering::Relaxed);
                 result
             }),
@@ -397,11 +441,12 @@ impl Monitor {
             "p99_ms"
         );
         loop {
-            let finished = args.frames > 0
+            // The frames asked for are in, or the camera is done (its frames, or a video's
+            // end) and the pipeline has drained.
+            let finished = (args.frames > 0
                 && (summary.outcomes.contains_key(&(args.frames - 1))
-                    || (!has_camera && summary.outcomes.len() as u64 >= args.frames)
-                    || (camera_done.load(Ordering::Relaxed)
-                        && last_output.elapsed() > DRAIN_TIMEOUT));
+                    || (!has_camera && summary.outcomes.len() as u64 >= args.frames)))
+                || (camera_done.load(Ordering::Relaxed) && last_output.elapsed() > DRAIN_TIMEOUT);
             if finished {
                 break;
             }

@@ -14,6 +14,8 @@ pub struct Readiness {
     started: Instant,
     model_loaded: AtomicBool,
     session_up: AtomicBool,
+    /// The frame source delivers (always true for services without a source of their own).
+    source_up: AtomicBool,
     /// Nanoseconds after `started` of the last input, plus one (0 = no input yet).
     last_input_ns: AtomicU64,
     max_input_age: Option<Duration>,
@@ -27,6 +29,8 @@ pub struct ReadinessReport {
     pub model_loaded: bool,
     /// The Zenoh session is open.
     pub session_up: bool,
+    /// The frame source delivers (a camera's; true for services without a source).
+    pub source_up: bool,
     /// Seconds since the last input; `None` before the first.
     pub input_age_secs: Option<f64>,
     /// The last input is recent enough (always true for services without inputs).
@@ -38,7 +42,7 @@ pub struct ReadinessReport {
 impl ReadinessReport {
     /// Ready to serve: every condition holds.
     pub fn is_ready(&self) -> bool {
-        self.model_loaded && self.session_up && self.inputs_fresh
+        self.model_loaded && self.session_up && self.source_up && self.inputs_fresh
     }
 
     /// `ready`/`not ready` and each condition, one per line.
@@ -47,7 +51,7 @@ impl ReadinessReport {
             .input_age_secs
             .map_or_else(|| "none".to_owned(), |secs| format!("{secs:.3}"));
         let mut text = format!(
-            "{}\nmodel_loaded {}\nsession_up {}\ninputs_fresh {}\ninput_age_secs {age}\n",
+            "{}\nmodel_loaded {}\nsession_up {}\nsource_up {}\ninputs_fresh {}\ninput_age_secs {age}\n",
             if self.is_ready() {
                 "ready"
             } else {
@@ -55,6 +59,7 @@ impl ReadinessReport {
             },
             self.model_loaded,
             self.session_up,
+            self.source_up,
             self.inputs_fresh,
         );
         for (key, value) in &self.details {
@@ -72,6 +77,7 @@ impl Readiness {
             started: Instant::now(),
             model_loaded: AtomicBool::new(false),
             session_up: AtomicBool::new(false),
+            source_up: AtomicBool::new(true),
             last_input_ns: AtomicU64::new(0),
             max_input_age,
             details: Mutex::new(Vec::new()),
@@ -100,6 +106,12 @@ impl Readiness {
         self.session_up.store(up, Ordering::Relaxed);
     }
 
+    /// Records whether the frame source delivers (a camera whose source failed, ended or
+    /// stalled is not ready until frames come again).
+    pub fn set_source_up(&self, up: bool) {
+        self.source_up.store(up, Ordering::Relaxed);
+    }
+
     /// Records that an input arrived now.
     pub fn mark_input(&self) {
         let since_start = u64::try_from(self.started.elapsed().as_nanos()).unwrap_or(u64::MAX);
@@ -123,6 +135,7 @@ impl Readiness {
         ReadinessReport {
             model_loaded: self.model_loaded.load(Ordering::Relaxed),
             session_up: self.session_up.load(Ordering::Relaxed),
+            source_up: self.source_up.load(Ordering::Relaxed),
             input_age_secs: input_age.map(|age| age.as_secs_f64()),
             inputs_fresh,
             details: self
@@ -165,5 +178,11 @@ mod tests {
         readiness.set_session_up(true);
         assert!(readiness.report().is_ready());
         assert!(readiness.report().to_text().starts_with("ready\n"));
+        readiness.set_source_up(false);
+        let down = readiness.report();
+        assert!(!down.is_ready() && !down.source_up);
+        assert!(down.to_text().contains("\nsource_up false\n"));
+        readiness.set_source_up(true);
+        assert!(readiness.report().is_ready());
     }
 }

@@ -9,6 +9,7 @@
 //! | `conesight_shared_memory_published_total` | counter | |
 //! | `conesight_errors_total` | counter | `kind` |
 //! | `conesight_frames_lost_total` | counter | `stream`: gaps in the input's frame sequence |
+//! | `conesight_source_restarts_total` | counter | (camera) restarts of a source that failed, ended or stalled |
 //! | `conesight_stage_latency_seconds` | histogram | `stage` |
 //! | `conesight_queue_depth` | gauge | |
 //! | `conesight_detections_masked_total` | counter | (detector) detections dropped in the ego mask |
@@ -60,6 +61,7 @@ pub struct Metrics {
     queue_depth: Gauge,
     detections_masked: Counter,
     detector_coverage: Gauge<f64, AtomicU64>,
+    source_restarts: Counter,
 }
 
 impl Default for Metrics {
@@ -85,6 +87,12 @@ impl Metrics {
         let queue_depth = Gauge::default();
         let detections_masked = Counter::default();
         let detector_coverage = Gauge::<f64, AtomicU64>::default();
+        let source_restarts = Counter::default();
+        registry.register(
+            "source_restarts",
+            "Restarts of the frame source after it failed, ended or stalled (camera)",
+            source_restarts.clone(),
+        );
         registry.register(
             "detections_masked",
             "Detections dropped because they stood in the ego mask (detector)",
@@ -149,7 +157,18 @@ impl Metrics {
             queue_depth,
             detections_masked,
             detector_coverage,
+            source_restarts,
         }
+    }
+
+    /// Counts one restart of the frame source.
+    pub fn source_restart(&self) {
+        self.source_restarts.inc();
+    }
+
+    /// Restarts of the frame source so far.
+    pub fn source_restart_count(&self) -> u64 {
+        self.source_restarts.get()
     }
 
     /// Counts detections dropped in the ego mask.
@@ -245,6 +264,7 @@ mod tests {
         metrics.error("malformed_protobuf");
         metrics.observe_stage("inference", Duration::from_millis(3));
         metrics.set_queue_depth(1);
+        metrics.source_restart();
         let text = metrics.encode();
         for line in [
             "conesight_frames_received_total 2",
@@ -256,6 +276,7 @@ mod tests {
             "conesight_stage_latency_seconds_bucket{le=\"0.0016\",stage=\"inference\"} 0",
             "conesight_stage_latency_seconds_bucket{le=\"0.0032\",stage=\"inference\"} 1",
             "conesight_queue_depth 1",
+            "conesight_source_restarts_total 1",
         ] {
             assert!(text.contains(line), "missing {line:?} in\n{text}");
         }

@@ -1,0 +1,279 @@
+//! [`FolderFrames`]: the images of a folder in name order, looped, decoded when due and kept
+//! within a memory budget.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+use conesight_pipeline::SourceFrame;
+use conesight_pipeline::boxes::read_boxes;
+use conesight_pipeline::source::{list_images, read_image};
+
+use crate::{Calibration, CameraFrame, FrameSource, Next, Pacing, SourceError};
+
+/// The images of a folder, in name order, looped. Listed at start; each image is decoded when
+/// it is first due (the one after it is decoded ahead on a thread meanwhile) and kept for the
+/// next loops while the decoded frames fit in the cache budget, so the first frame goes out
+/// after one decode and a folder of any size runs in bounded memory. An unreadable image (or
+/// label file, with labels) is logged once and skipped on every loop.
+#[derive(Debug)]
+pub struct FolderFrames {
+    dir: PathBuf,
+    paths: Vec<PathBuf>,
+    calibration: Calibration,
+    /// Where the label files are, when the boxes are wanted.
+    labels: Option<PathBuf>,
+    budget_bytes: usize,
+    cache: Vec<Option<CameraFrame>>,
+    cached_bytes: usize,
+    unreadable: Vec<bool>,
+    /// The image being decoded ahead: (index, thread).
+    ahead: Option<(usize, JoinHandle<Result<CameraFrame, SourceError>>)>,
+    /// The next image to give.
+    cursor: usize,
+}
+
+/// Decodes image `index` of a folder (and its labels when `labels` is set).
+fn read_folder_frame(
+    index: usize,
+    path: &Path,
+    calibration: Calibration,
+    labels: Option<&Path>,
+) -> Result<CameraFrame, SourceError> {
+    let image = read_image(path)?;
+    let boxes = match labels {
+        Some(dir) => read_boxes(
+            &dir.join(path.with_extension("txt").file_name().unwrap_or_default()),
+            image.width(),
+            image.height(),
+        )?,
+        None => Vec::new(),
+    };
+    Ok(CameraFrame {
+        frame: SourceFrame {
+            index: index as u64,
+            name: path.display().to_string(),
+            image: Arc::new(image),
+            camera: calibration.camera,
+            extrinsics: calibration.extrinsics,
+            truth: None,
+        },
+        boxes,
+        acquisition_ns: None,
+    })
+}
+
+impl FolderFrames {
+    /// The images of `dir` (at least one file with an image extension), decoded later; the
+    /// label files of `labels` give each image's boxes; decoded frames are kept within
+    /// `cache_mb` MiB.
+    pub fn new(
+        dir: &Path,
+        calibration: Calibration,
+        labels: Option<PathBuf>,
+        cache_mb: usize,
+    ) -> Result<Self, SourceError> {
+        let paths = list_images(dir)?;
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            cache: vec![None; paths.len()],
+            unreadable: vec![false; paths.len()],
+            paths,
+            calibration,
+            labels,
+            budget_bytes: cache_mb.saturating_mul(1 << 20),
+            cached_bytes: 0,
+            ahead: None,
+            cursor: 0,
+        })
+    }
+
+    /// Number of image files listed.
+    pub fn len(&self) -> usize {
+        self.paths.len()
+    }
+
+    /// True when no file is listed (never: [`FolderFrames::new`] refuses an empty folder).
+    pub fn is_empty(&self) -> bool {
+        self.paths.is_empty()
+    }
+
+    /// Decoded frames kept for the next loops.
+    pub fn cached(&self) -> usize {
+        self.cache.iter().flatten().count()
+    }
+
+    fn decode_ahead(&self, index: usize) -> JoinHandle<Result<CameraFrame, SourceError>> {
+        let (path, calibration, labels) = (
+            self.paths[index].clone(),
+            self.calibration,
+            self.labels.clone(),
+        );
+        std::thread::spawn(move || read_folder_frame(index, &path, calibration, labels.as_deref()))
+    }
+
+    fn decode(&mut self, index: usize) -> Result<CameraFrame, SourceError> {
+        match self.ahead.take() {
+            Some((ahead, thread)) if ahead == index => thread.join().unwrap_or_else(|_| {
+                Err(SourceError::Failed {
+                    source_name: self.name(),
+                    reason: "the decoding thread panicked".to_owned(),
+                })
+            }),
+            // A stale look-ahead (the image after a skipped one) finishes on its own.
+            _ => read_folder_frame(
+                index,
+                &self.paths[index],
+                self.calibration,
+                self.labels.as_deref(),
+            ),
+        }
+    }
+
+    /// The next readable image from the cursor on.
+    fn next_readable(&mut self) -> Result<CameraFrame, SourceError> {
+        let count = self.paths.len();
+        for _ in 0..count {
+            let index = self.cursor % count;
+            self.cursor = (index + 1) % count;
+            if self.unreadable[index] {
+                continue;
+            }
+            let frame = match self.cache[index].clone() {
+                Some(frame) => frame,
+                None => match self.decode(index) {
+                    Ok(frame) => {
+                        let bytes = frame.frame.image.as_raw().len();
+                        if self.cached_bytes + bytes <= self.budget_bytes {
+                            self.cached_bytes += bytes;
+                            self.cache[index] = Some(frame.clone());
+                        }
+                        frame
+                    }
+                    Err(error) => {
+                        tracing::warn!(%error, "skipping image");
+                        self.unreadable[index] = true;
+                        continue;
+                    }
+                },
+            };
+            // Decode the next image meanwhile, unless it is cached or known unreadable.
+            let next = (index + 1) % count;
+            if self.cache[next].is_none() && !self.unreadable[next] && self.ahead.is_none() {
+                self.ahead = Some((next, self.decode_ahead(next)));
+            }
+            return Ok(frame);
+        }
+        Err(SourceError::Failed {
+            source_name: self.name(),
+            reason: format!("no readable image in {}", self.dir.display()),
+        })
+    }
+}
+
+impl FrameSource for FolderFrames {
+    fn name(&self) -> String {
+        format!("folder:{}", self.dir.display())
+    }
+
+    fn pacing(&self) -> Pacing {
+        Pacing::Publisher
+    }
+
+    fn start(&mut self) -> Result<(), SourceError> {
+        Ok(())
+    }
+
+    fn next_frame(&mut self, _timeout: Duration) -> Result<Next, SourceError> {
+        self.next_readable()
+            .map(|frame| Next::Frame(Box::new(frame)))
+    }
+
+    fn repeats_frames(&self) -> bool {
+        true
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use conesight_core::{Camera, Extrinsics};
+
+    /// A folder of `good` small PNGs named 0.png, 1.png, ... and one file that is not an image.
+    fn folder(name: &str, good: usize) -> PathBuf {
+        let dir =
+            std::env::temp_dir().join(format!("conesight-sources-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        for i in 0..good {
+            image::RgbImage::from_pixel(8, 6, image::Rgb([i as u8, 0, 0]))
+                .save(dir.join(format!("{i}.png")))
+                .unwrap();
+        }
+        std::fs::write(dir.join(format!("{good}.png")), b"not a png").unwrap();
+        dir
+    }
+
+    fn open(dir: &Path, cache_mb: usize) -> FolderFrames {
+        let calibration = Calibration {
+            camera: Camera::paper_default(),
+            extrinsics: Extrinsics::paper_default(),
+        };
+        FolderFrames::new(dir, calibration, None, cache_mb).unwrap()
+    }
+
+    fn next(frames: &mut FolderFrames) -> Result<CameraFrame, SourceError> {
+        match frames.next_frame(Duration::ZERO)? {
+            Next::Frame(frame) => Ok(*frame),
+            other => panic!("a folder always has a frame: {other:?}"),
+        }
+    }
+
+    #[test]
+    fn folder_frames_loop_skip_unreadable_files_and_cache_within_budget() {
+        let dir = folder("loop", 3);
+        let mut frames = open(&dir, 1);
+        assert_eq!(frames.len(), 4);
+        assert_eq!(frames.cached(), 0, "nothing is decoded up front");
+        let mut seen = Vec::new();
+        for _ in 0..8 {
+            let frame = next(&mut frames).unwrap();
+            seen.push(frame.frame.index);
+            assert_eq!(
+                frame.frame.image.get_pixel(0, 0)[0] as u64,
+                frame.frame.index
+            );
+        }
+        // File 3 is broken: skipped on every loop.
+        assert_eq!(seen, vec![0, 1, 2, 0, 1, 2, 0, 1]);
+        assert_eq!(frames.cached(), 3);
+        assert!(frames.repeats_frames());
+
+        // A budget of 0 keeps nothing: every loop decodes again (memory stays bounded).
+        let mut uncached = open(&dir, 0);
+        for _ in 0..6 {
+            assert!(next(&mut uncached).is_ok());
+        }
+        assert_eq!(uncached.cached(), 0);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn empty_or_unreadable_folders_are_clear_errors() {
+        let dir = folder("bad", 0);
+        let mut frames = open(&dir, 1);
+        let error = next(&mut frames).unwrap_err().to_string();
+        assert!(error.contains("no readable image"), "{error}");
+        std::fs::remove_file(dir.join("0.png")).unwrap();
+        let calibration = Calibration {
+            camera: Camera::paper_default(),
+            extrinsics: Extrinsics::paper_default(),
+        };
+        let error = FolderFrames::new(&dir, calibration, None, 1)
+            .unwrap_err()
+            .to_string();
+        assert!(error.contains("no image files"), "{error}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
