@@ -59,6 +59,8 @@ pub struct McapFile {
     file: File,
     reader: LinearReader,
     state: FileState,
+    /// The file's size when opened.
+    len: u64,
     at_eof: bool,
     done: bool,
 }
@@ -98,6 +100,7 @@ impl McapFile {
                 path: path.to_path_buf(),
             });
         }
+        let len = file.metadata().map_err(io)?.len();
         let reader = LinearReader::new_with_options(
             LinearReaderOptions::default().with_skip_start_magic(true),
         );
@@ -109,6 +112,7 @@ impl McapFile {
                 bytes_read: 8,
                 ..FileState::default()
             },
+            len,
             at_eof: false,
             done: false,
         })
@@ -152,7 +156,9 @@ impl McapFile {
                 }
                 Err(source) => {
                     self.done = true;
-                    if self.at_eof {
+                    // Cut inside a record: the reader complains at the end of the data (end
+                    // of file, or end of a chunk whose rest is missing).
+                    if self.at_eof || self.state.bytes_read >= self.len {
                         self.state.truncated = true;
                         tracing::warn!(
                             path = %self.path.display(),
