@@ -33,8 +33,8 @@ pub struct DiffArgs {
     gate_fraction: f64,
 }
 
-/// Runs `conesight diff`; `Ok(false)` when `--fail-above` is exceeded.
-pub fn run(args: &DiffArgs) -> anyhow::Result<bool> {
+/// Runs `conesight diff`; exit status 1 when `--fail-above` is exceeded.
+pub fn run(args: &DiffArgs) -> anyhow::Result<std::process::ExitCode> {
     let params = DiffParams {
         gate_m: args.gate_m,
         gate_fraction: args.gate_fraction,
@@ -73,7 +73,11 @@ pub fn run(args: &DiffArgs) -> anyhow::Result<bool> {
             );
         }
     }
-    Ok(passed)
+    Ok(if passed {
+        std::process::ExitCode::SUCCESS
+    } else {
+        std::process::ExitCode::FAILURE
+    })
 }
 
 fn fmt_m(value: Option<f64>) -> String {
@@ -158,7 +162,10 @@ fn plot_changes(path: &Path, report: &DiffReport) -> anyhow::Result<()> {
         let root = BitMapBackend::new(path, (900, 600)).into_drawing_area();
         root.fill(&WHITE)?;
         let mut chart = ChartBuilder::on(&root)
-            .caption("Position change of matched cones, B vs A", ("sans-serif", 22))
+            .caption(
+                "Position change of matched cones, B vs A",
+                ("sans-serif", 22),
+            )
             .margin(12)
             .x_label_area_size(44)
             .y_label_area_size(70)
@@ -213,11 +220,7 @@ fn plot_counts(path: &Path, report: &DiffReport) -> anyhow::Result<()> {
         .enumerate()
         .map(|(i, f)| (i as f64, f.cones_in_b as f64 - f.cones_in_a as f64))
         .collect();
-    let extent = points
-        .iter()
-        .map(|p| p.1.abs())
-        .fold(1.0_f64, f64::max)
-        + 0.5;
+    let extent = points.iter().map(|p| p.1.abs()).fold(1.0_f64, f64::max) + 0.5;
     let frames = (points.len() as f64).max(1.0);
     let draw = || -> Result<(), Box<dyn std::error::Error>> {
         let root = BitMapBackend::new(path, (900, 600)).into_drawing_area();

@@ -66,23 +66,17 @@ pub(crate) const GIT_REVISION: &str = env!("CONESIGHT_GIT_REVISION");
 
 fn main() -> anyhow::Result<std::process::ExitCode> {
     let cli = Cli::parse();
-    if let Command::Diff(args) = &cli.command {
-        return Ok(if diff_cmd::run(args)? {
-            std::process::ExitCode::SUCCESS
-        } else {
-            std::process::ExitCode::FAILURE
-        });
-    }
     match cli.command {
-        Command::Run(args) => run::run(args),
-        Command::Predict(args) => predict::run(&args),
-        Command::Keypoints(args) => keypoints_cmd::run(&args),
-        Command::Demo(args) => demo::run(&args),
-        Command::Sim(args) => conesight_sim::cli::run(args),
-        Command::Eval(args) => conesight_eval::cli::run(&args),
-        Command::Record(args) => record_cmd::run(args),
-        Command::Replay(args) => replay_cmd::run(args),
-        Command::Diff(_) => Ok(()),
-    }?;
+        Command::Run(args) => run::run(args)?,
+        Command::Predict(args) => predict::run(&args)?,
+        Command::Keypoints(args) => keypoints_cmd::run(&args)?,
+        Command::Demo(args) => demo::run(&args)?,
+        Command::Sim(args) => conesight_sim::cli::run(args)?,
+        Command::Eval(args) => conesight_eval::cli::run(&args)?,
+        Command::Record(args) => record_cmd::run(args)?,
+        Command::Replay(args) => replay_cmd::run(args)?,
+        // Exit status 1 when `--fail-above` is exceeded.
+        Command::Diff(args) => return diff_cmd::run(&args),
+    }
     Ok(std::process::ExitCode::SUCCESS)
 }

@@ -114,7 +114,11 @@ async fn run_async(args: ReplayArgs) -> anyhow::Result<()> {
     let recorder = match &args.record {
         Some(path) => {
             let mut options = RecorderOptions::new(path);
-            options.streams = args.record_streams.iter().map(|s| Stream::from(*s)).collect();
+            options.streams = args
+                .record_streams
+                .iter()
+                .map(|s| Stream::from(*s))
+                .collect();
             options.queue_len = 64;
             let metadata = &mut options.sink.metadata;
             metadata.insert("git_revision".into(), crate::GIT_REVISION.to_owned());

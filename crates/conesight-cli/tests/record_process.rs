@@ -98,9 +98,8 @@ async fn kill_9_leaves_every_closed_chunk_readable() {
     while started.elapsed() < Duration::from_millis(3500) {
         tick.tick().await;
         let message = frame(640, 480, published).encode_to_vec();
-        let (payload, _) = write_payload_infallible(&session, message.len(), |buf| {
-            buf.copy_from_slice(&message)
-        });
+        let (payload, _) =
+            write_payload_infallible(&session, message.len(), |buf| buf.copy_from_slice(&message));
         publish_payload(&frames, payload).await.unwrap();
         let header = pb::Header::new("front", published, 1_000 + published, "front_optical");
         publish_payload(&cones, encode(&pb::Cones::new_stamped(header, &[])))
@@ -164,7 +163,9 @@ async fn recorder_memory_stays_bounded_at_20_hz_of_raw_full_frames() {
         .unwrap();
     until_matched(&frames, &recorder).await;
     // Eight distinct raw 1920x1200 frames, published in turn.
-    let encoded: Vec<Vec<u8>> = (0..8).map(|s| frame(1920, 1200, s).encode_to_vec()).collect();
+    let encoded: Vec<Vec<u8>> = (0..8)
+        .map(|s| frame(1920, 1200, s).encode_to_vec())
+        .collect();
     const SECONDS: u64 = 30;
     let mut tick = tokio::time::interval(Duration::from_millis(50));
     let mut samples = Vec::new();
@@ -173,12 +174,11 @@ async fn recorder_memory_stays_bounded_at_20_hz_of_raw_full_frames() {
     while started.elapsed() < Duration::from_secs(SECONDS) {
         tick.tick().await;
         let message = &encoded[(published % 8) as usize];
-        let (payload, _) = write_payload_infallible(&session, message.len(), |buf| {
-            buf.copy_from_slice(message)
-        });
+        let (payload, _) =
+            write_payload_infallible(&session, message.len(), |buf| buf.copy_from_slice(message));
         publish_payload(&frames, payload).await.unwrap();
         published += 1;
-        if published % 5 == 0 {
+        if published.is_multiple_of(5) {
             samples.push(rss_bytes(recorder.pid()).unwrap());
         }
     }
@@ -196,7 +196,10 @@ async fn recorder_memory_stays_bounded_at_20_hz_of_raw_full_frames() {
         mib(late_max),
         recorder.stdout().trim()
     );
-    assert!(published as f64 / elapsed > 15.0, "the publisher fell behind");
+    assert!(
+        published as f64 / elapsed > 15.0,
+        "the publisher fell behind"
+    );
     assert!(max_rss < 512 << 20, "recorder RSS {:.1} MiB", mib(max_rss));
     std::fs::remove_file(&out).unwrap();
 }

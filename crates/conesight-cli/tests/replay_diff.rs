@@ -33,7 +33,10 @@ fn cones_of(path: &Path) -> BTreeMap<u64, Vec<pb::Cone>> {
         if message.stream == Stream::Cones {
             let decoded = pb::Cones::decode(&message.data[..]).unwrap();
             let sequence = decoded.header.unwrap().frame_sequence;
-            assert!(cones.insert(sequence, decoded.cones).is_none(), "frame {sequence} twice");
+            assert!(
+                cones.insert(sequence, decoded.cones).is_none(),
+                "frame {sequence} twice"
+            );
         }
     }
     cones
@@ -85,7 +88,11 @@ fn record_drive(dir: &TempDir) -> PathBuf {
         ],
         &dir.join("camera.log"),
     );
-    assert!(camera.wait(Duration::from_secs(120)).success(), "{}", camera.log_text());
+    assert!(
+        camera.wait(Duration::from_secs(120)).success(),
+        "{}",
+        camera.log_text()
+    );
     std::thread::sleep(Duration::from_millis(500));
     assert!(
         recorder.interrupt(Duration::from_secs(30)).success(),
@@ -192,7 +199,13 @@ fn write_moved(from: &Path, to: &Path) {
         let mut data = message.data.clone();
         if message.stream == Stream::Cones {
             let mut cones = pb::Cones::decode(&data[..]).unwrap();
-            if cones.header.as_ref().unwrap().frame_sequence % 2 == 0 {
+            if cones
+                .header
+                .as_ref()
+                .unwrap()
+                .frame_sequence
+                .is_multiple_of(2)
+            {
                 for cone in &mut cones.cones {
                     cone.position_in_vehicle_m.as_mut().unwrap().x += 0.3;
                 }
@@ -280,6 +293,9 @@ fn a_recorded_drive_replays_to_identical_cones_and_diff_sees_a_change() {
     assert_eq!(all["only_in_b"], 0);
     let p95 = all["p95_change_m"].as_f64().unwrap();
     let max = all["max_change_m"].as_f64().unwrap();
-    assert!((p95 - 0.3).abs() < 1e-6 && (max - 0.3).abs() < 1e-6, "{all}");
+    assert!(
+        (p95 - 0.3).abs() < 1e-6 && (max - 0.3).abs() < 1e-6,
+        "{all}"
+    );
     eprintln!("whole test: {:.1} s", started.elapsed().as_secs_f64());
 }

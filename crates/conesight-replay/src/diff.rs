@@ -1,8 +1,9 @@
 //! [`diff`]: the cones of two recordings of the same drive compared frame by frame (an old
 //! model against a new one: the regression check of a model update).
 //!
-//! Frames are matched on camera, frame sequence and acquisition stamp (the identity every
-//! pipeline message copies from its frame). In a frame of both files, cones are matched
+//! Frames are matched on camera and frame sequence, which every pipeline message copies from
+//! its frame and a replay keeps (it stamps acquisition times anew); when a camera restarted
+//! and its sequences repeat, the n-th occurrence in A meets the n-th in B. In a frame of both files, cones are matched
 //! greedily, nearest pair first: a pair must have the same class and lie within the gate,
 //! `gate_m + gate_fraction * range` of A's cone (1 m + 10 % by default), in the vehicle frame.
 //! Cones of one class in a frame stand metres apart, so nearest-first agrees with an optimal
@@ -41,8 +42,10 @@ impl Default for DiffParams {
     }
 }
 
-/// A frame's identity: camera, sequence, acquisition stamp (ns).
-pub type FrameKey = (String, u64, u64);
+/// A frame's identity: camera, frame sequence, and which occurrence of that sequence in the
+/// file (0 unless the camera restarted and its sequences repeat). Not the acquisition stamp:
+/// a replay stamps frames anew.
+pub type FrameKey = (String, u64, u32);
 
 /// One cone as the diff sees it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -60,8 +63,8 @@ pub struct DiffCone {
 pub struct RunCones {
     /// Cones per frame.
     pub frames: BTreeMap<FrameKey, Vec<DiffCone>>,
-    /// Cones messages of a frame seen before (the first one is kept).
-    pub duplicates: u64,
+    /// Cones messages whose camera and sequence were seen before (told apart by occurrence).
+    pub repeated_sequences: u64,
     /// Whether a file ended short.
     pub truncated: bool,
 }
@@ -70,6 +73,7 @@ pub struct RunCones {
 pub fn read_cones(paths: &[PathBuf]) -> Result<RunCones, ReplayError> {
     let mut recording = Recording::open(paths)?;
     let mut run = RunCones::default();
+    let mut occurrences: BTreeMap<(String, u64), u32> = BTreeMap::new();
     while let Some(message) = recording.next_message()? {
         if message.stream != Stream::Cones {
             continue;
@@ -79,20 +83,19 @@ pub fn read_cones(paths: &[PathBuf]) -> Result<RunCones, ReplayError> {
         let Some(header) = cones.header.as_ref() else {
             continue;
         };
-        let key = (
-            header.camera_id.clone(),
-            header.frame_sequence,
-            header.acquisition_time_ns,
-        );
-        if run.frames.contains_key(&key) {
-            run.duplicates += 1;
-            continue;
+        let seen = occurrences
+            .entry((header.camera_id.clone(), header.frame_sequence))
+            .or_insert(0_u32);
+        let key = (header.camera_id.clone(), header.frame_sequence, *seen);
+        if *seen > 0 {
+            run.repeated_sequences += 1;
         }
+        *seen += 1;
         let list = cones
             .cones
             .iter()
             .map(|cone| {
-                let p = cone.position_in_vehicle_m.clone().unwrap_or_default();
+                let p = cone.position_in_vehicle_m.unwrap_or_default();
                 DiffCone {
                     class: cone.detection.as_ref().map_or(0, |d| d.class),
                     position_in_vehicle_m: [p.x, p.y, p.z],
@@ -344,13 +347,12 @@ pub fn percentile(sorted: &[f64], p: f64) -> Option<f64> {
     Some(sorted[low] * (1.0 - t) + sorted[high.min(last)] * t)
 }
 
+/// Pairs `(i in A, j in B, distance m)`, unmatched indices of A, unmatched indices of B.
+pub type FrameMatches = (Vec<(usize, usize, f64)>, Vec<usize>, Vec<usize>);
+
 /// Greedy nearest-first matching of one frame: (pairs `(i in A, j in B, distance m)`,
 /// unmatched indices of A, unmatched indices of B).
-pub fn match_frame(
-    a: &[DiffCone],
-    b: &[DiffCone],
-    params: &DiffParams,
-) -> (Vec<(usize, usize, f64)>, Vec<usize>, Vec<usize>) {
+pub fn match_frame(a: &[DiffCone], b: &[DiffCone], params: &DiffParams) -> FrameMatches {
     let mut candidates = Vec::new();
     for (i, cone_a) in a.iter().enumerate() {
         let gate = params.gate_m + params.gate_fraction * cone_a.range_m.abs();
@@ -426,7 +428,7 @@ mod tests {
         let mut run = RunCones::default();
         for seq in 0..5 {
             run.frames.insert(
-                ("front".into(), seq, 100 + seq),
+                ("front".into(), seq, 0),
                 vec![cone(1, 5.0, 1.5), cone(2, 15.0, -1.5), cone(3, 35.0, 0.0)],
             );
         }
@@ -444,7 +446,7 @@ mod tests {
             cones[1].position_in_vehicle_m[0] += 0.5;
             moved.frames.insert(key.clone(), cones);
         }
-        moved.frames.remove(&("front".into(), 4, 104));
+        moved.frames.remove(&("front".into(), 4, 0));
         let report = compare(&paths, &paths, &run, &moved, &DiffParams::default());
         assert!(!report.is_zero_change());
         assert_eq!(report.frames_only_in_a, 1);

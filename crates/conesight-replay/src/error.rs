@@ -55,7 +55,9 @@ pub enum ReplayError {
         known: String,
     },
     /// A message refers to a channel the file never declared.
-    #[error("{path}: a message on channel id {channel_id}, which the file never declares (the file is damaged: re-record it)")]
+    #[error(
+        "{path}: a message on channel id {channel_id}, which the file never declares (the file is damaged: re-record it)"
+    )]
     UnknownChannel {
         /// The file.
         path: PathBuf,

@@ -1,10 +1,13 @@
 //! [`Player`]: a recording's frames and camera info published into a namespace.
 //!
 //! A reader thread streams the files (merged in log-time order, a few messages ahead) to the
-//! async side, which publishes each frame and camera info byte for byte as recorded (stamps
-//! included, so the cones of a replay are reproducible) on the keys of the replay's
+//! async side, which publishes each frame and camera info on the keys of the replay's
 //! [`Topics`], whatever namespace and vehicle the file was recorded under. The camera of a key
-//! is the one the message's header names. Other streams of the file (detections, keypoints,
+//! is the one the message's header names. Pixels (raw or JPEG), camera, sequence and
+//! calibration are kept as recorded, so the cones of two replays are identical; the stamps are
+//! replay time (the services drop inputs whose acquisition stamp is far from their clock):
+//! acquisition = the replay's start plus the recorded log-time offset divided by the rate, or,
+//! as fast as possible, the publish time. Other streams of the file (detections, keypoints,
 //! cones) are skipped: the pipeline makes them again.
 //!
 //! Pacing ([`Pacing`]): the recorded log times scaled by a rate, or as fast as the pipeline
@@ -24,13 +27,12 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 use conesight_bus::zenoh::Session;
-use conesight_bus::zenoh::bytes::ZBytes;
 use conesight_bus::zenoh::pubsub::Publisher;
 use conesight_bus::{
-    RingSubscriber, Stream, Topics, declare_publisher, declare_subscriber, publish_payload,
+    RingSubscriber, Stream, Topics, declare_publisher, declare_subscriber, encode, publish_payload,
     write_payload_infallible,
 };
-use conesight_proto::{pb, peek_header};
+use conesight_proto::{Message, now_ns, pb, peek_header};
 use tokio::sync::mpsc;
 
 use crate::error::ReplayError;
@@ -145,6 +147,8 @@ pub struct Player {
     cones: RingSubscriber,
     primed: BTreeMap<String, Vec<u8>>,
     pending: HashSet<FrameId>,
+    /// First log time, when it was replayed, and the wall clock then (ns).
+    clock: Option<(u64, Instant, u64)>,
     summary: ReplaySummary,
 }
 
@@ -172,6 +176,7 @@ impl Player {
             cones,
             primed: BTreeMap::new(),
             pending: HashSet::new(),
+            clock: None,
             summary: ReplaySummary::default(),
         })
     }
@@ -182,11 +187,10 @@ impl Player {
     pub async fn prepare(&mut self, paths: &[PathBuf]) -> Result<Vec<String>, ReplayError> {
         let window_ns = u64::try_from(self.options.prime_window.as_nanos()).unwrap_or(u64::MAX);
         let paths_owned = paths.to_vec();
-        let (cameras, infos) = tokio::task::spawn_blocking(move || {
-            first_camera_infos(&paths_owned, window_ns)
-        })
-        .await
-        .map_err(|_| ReplayError::Thread("panicked"))??;
+        let (cameras, infos) =
+            tokio::task::spawn_blocking(move || first_camera_infos(&paths_owned, window_ns))
+                .await
+                .map_err(|_| ReplayError::Thread("panicked"))??;
         let deadline = Instant::now() + self.options.wait_for_subscribers;
         for camera in &cameras {
             for stream in [Stream::CameraInfo, Stream::Frame] {
@@ -221,8 +225,11 @@ impl Player {
     async fn publish_primed(&mut self) -> Result<(), ReplayError> {
         let primed = std::mem::take(&mut self.primed);
         for (camera, data) in &primed {
+            let mut info = pb::CameraInfo::decode(&data[..])
+                .map_err(|_| ReplayError::Thread("lost a camera info"))?;
+            info.header = info.header.map(|h| restamp(h, now_ns()));
             let publisher = self.publisher(camera, Stream::CameraInfo).await?;
-            publish_payload(publisher, ZBytes::from(data.clone())).await?;
+            publish_payload(publisher, encode(&info)).await?;
             self.summary.camera_info_published += 1;
         }
         self.primed = primed;
@@ -261,7 +268,6 @@ impl Player {
             .spawn(move || read_loop(&reader_paths, &sender, &reader_progress, &reader_stop))
             .map_err(|_| ReplayError::Thread("could not be started"))?;
         let started = Instant::now();
-        let mut clock: Option<(u64, Instant)> = None;
         let mut outcome = Ok(());
         while let Some(event) = receiver.recv().await {
             if stop.load(Ordering::Relaxed) {
@@ -278,14 +284,24 @@ impl Player {
                     break;
                 }
             };
-            if let Pacing::Rate(rate) = self.options.pacing {
-                let (first_ns, first_at) = *clock.get_or_insert((message.log_time_ns, Instant::now()));
-                let offset_ns = message.log_time_ns.saturating_sub(first_ns) as f64 / rate;
-                let due = first_at + Duration::from_secs_f64(offset_ns / 1e9);
-                self.receive_cones_until(due, &progress).await;
-            }
+            let (first_ns, first_at, first_wall_ns) =
+                *self
+                    .clock
+                    .get_or_insert((message.log_time_ns, Instant::now(), now_ns()));
+            let stamp_ns = match self.options.pacing {
+                Pacing::Rate(rate) => {
+                    let offset_ns = message.log_time_ns.saturating_sub(first_ns) as f64 / rate;
+                    let due = first_at + Duration::from_secs_f64(offset_ns / 1e9);
+                    self.receive_cones_until(due, &progress).await;
+                    first_wall_ns.saturating_add(offset_ns as u64)
+                }
+                Pacing::AsFastAsPossible => now_ns(),
+            };
             let path = paths.get(message.file).cloned().unwrap_or_default();
-            if let Err(error) = self.publish(&path, message, &progress, &stop).await {
+            if let Err(error) = self
+                .publish(&path, message, stamp_ns, &progress, &stop)
+                .await
+            {
                 outcome = Err(error);
                 break;
             }
@@ -294,8 +310,11 @@ impl Player {
         if outcome.is_ok() && matches!(self.options.pacing, Pacing::Rate(_)) {
             let deadline = Instant::now() + self.options.drain;
             while !self.pending.is_empty() && Instant::now() < deadline {
-                self.receive_cones_until(deadline.min(Instant::now() + Duration::from_millis(50)), &progress)
-                    .await;
+                self.receive_cones_until(
+                    deadline.min(Instant::now() + Duration::from_millis(50)),
+                    &progress,
+                )
+                .await;
             }
             self.summary.frames_lost += self.pending.len() as u64;
             progress
@@ -315,12 +334,13 @@ impl Player {
         &mut self,
         path: &std::path::Path,
         message: RecordedMessage,
+        stamp_ns: u64,
         progress: &ReplayProgress,
         stop: &AtomicBool,
     ) -> Result<(), ReplayError> {
         match message.stream {
             Stream::Frame => {
-                let frame: pb::ImageFrame = crate::reader::decode_message(path, &message)?;
+                let mut frame: pb::ImageFrame = crate::reader::decode_message(path, &message)?;
                 let header = frame
                     .validate()
                     .map_err(|error| error.to_string())
@@ -330,15 +350,19 @@ impl Player {
                             .map_err(|error| error.to_string())
                     })
                     .map_err(|reason| undecodable(path, &message, reason))?;
-                drop(frame);
+                let header = restamp(header, stamp_ns);
                 let id = frame_id(&header);
-                let data = message.data;
-                let (payload, _) = write_payload_infallible(&self.session, data.len(), |buf| {
-                    buf.copy_from_slice(&data);
+                let camera = header.camera_id.clone();
+                frame.header = Some(header);
+                drop(message);
+                let len = frame.encoded_len();
+                let (payload, _) = write_payload_infallible(&self.session, len, |mut buf| {
+                    // Exactly `encoded_len` bytes: cannot run out of room.
+                    let _ = frame.encode(&mut buf);
                 });
-                drop(data);
+                drop(frame);
                 self.pending.insert(id.clone());
-                let publisher = self.publisher(&header.camera_id, Stream::Frame).await?;
+                let publisher = self.publisher(&camera, Stream::Frame).await?;
                 publish_payload(publisher, payload).await?;
                 self.summary.frames_published += 1;
                 progress.frames_published.fetch_add(1, Ordering::Relaxed);
@@ -347,11 +371,15 @@ impl Player {
                 }
             }
             Stream::CameraInfo => {
-                let info: pb::CameraInfo = crate::reader::decode_message(path, &message)?;
+                let mut info: pb::CameraInfo = crate::reader::decode_message(path, &message)?;
                 let header = conesight_proto::require_header(&info.header)
+                    .cloned()
                     .map_err(|error| undecodable(path, &message, error.to_string()))?;
-                let publisher = self.publisher(&header.camera_id, Stream::CameraInfo).await?;
-                publish_payload(publisher, ZBytes::from(message.data)).await?;
+                let header = restamp(header, stamp_ns);
+                let camera = header.camera_id.clone();
+                info.header = Some(header);
+                let publisher = self.publisher(&camera, Stream::CameraInfo).await?;
+                publish_payload(publisher, encode(&info)).await?;
                 self.summary.camera_info_published += 1;
             }
             _ => self.summary.skipped_messages += 1,
@@ -363,7 +391,9 @@ impl Player {
     /// frame timeout; a frame without cones by then is lost.
     async fn await_cones(&mut self, id: &FrameId, progress: &ReplayProgress, stop: &AtomicBool) {
         let deadline = Instant::now() + self.options.frame_timeout;
-        while self.pending.contains(id) && Instant::now() < deadline && !stop.load(Ordering::Relaxed)
+        while self.pending.contains(id)
+            && Instant::now() < deadline
+            && !stop.load(Ordering::Relaxed)
         {
             let step = deadline.min(Instant::now() + Duration::from_millis(200));
             self.receive_cones_until(step, progress).await;
@@ -396,6 +426,14 @@ impl Player {
             }
         }
     }
+}
+
+/// `header` acquired at `stamp_ns` and published now; camera and sequence as recorded (the
+/// services drop inputs whose stamp is far from their clock, so a replay is stamped anew).
+fn restamp(mut header: pb::Header, stamp_ns: u64) -> pb::Header {
+    header.acquisition_time_ns = stamp_ns;
+    header.publish_time_ns = now_ns().max(stamp_ns);
+    header
 }
 
 fn undecodable(path: &std::path::Path, message: &RecordedMessage, reason: String) -> ReplayError {
@@ -444,11 +482,11 @@ fn read_loop(
     }
 }
 
+/// Cameras in order of appearance, and the first camera info of each (encoded).
+type CamerasAndInfos = (Vec<String>, BTreeMap<String, Vec<u8>>);
+
 /// The cameras of the first `window_ns` of log time and the first camera info of each.
-fn first_camera_infos(
-    paths: &[PathBuf],
-    window_ns: u64,
-) -> Result<(Vec<String>, BTreeMap<String, Vec<u8>>), ReplayError> {
+fn first_camera_infos(paths: &[PathBuf], window_ns: u64) -> Result<CamerasAndInfos, ReplayError> {
     let mut recording = Recording::open(paths)?;
     let mut cameras = Vec::new();
     let mut infos = BTreeMap::new();
