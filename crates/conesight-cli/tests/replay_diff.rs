@@ -104,7 +104,7 @@ fn record_drive(dir: &TempDir) -> PathBuf {
 
 /// The pipeline in a fresh namespace, the drive replayed through it as fast as possible with
 /// its cones recorded; returns (replay summary, the cones recording).
-fn replay_once(dir: &TempDir, drive: &Path, run: u32) -> (Value, PathBuf) {
+fn replay_once(dir: &TempDir, drive: &Path, run: u32, frames: u64) -> (Value, PathBuf) {
     let namespace = format!("replay{}x{run}", std::process::id());
     let endpoint = format!("tcp/127.0.0.1:{}", free_port());
     let http = free_port().saturating_sub(10).max(20_000);
@@ -179,7 +179,7 @@ fn replay_once(dir: &TempDir, drive: &Path, run: u32) -> (Value, PathBuf) {
         );
         assert_eq!(
             metric(&body, "conesight_frames_processed_total"),
-            Some(FRAMES as f64)
+            Some(frames as f64)
         );
     }
     assert!(
@@ -258,27 +258,37 @@ fn a_recorded_drive_replays_to_identical_cones_and_diff_sees_a_change() {
             frames.push(frame.header.unwrap().frame_sequence);
         }
     }
-    assert_eq!(frames, (0..FRAMES).collect::<Vec<_>>(), "the recording");
-    eprintln!("recorded in {:.1} s", started.elapsed().as_secs_f64());
+    // Frames travel with congestion control Drop, so on a loaded machine the recording can
+    // miss one (198 of 200 once here); the replay is checked against what was recorded.
+    let recorded = frames.len() as u64;
+    assert!(
+        recorded >= FRAMES - 5,
+        "recorded {recorded} of {FRAMES} frames"
+    );
+    assert!(frames.windows(2).all(|w| w[0] < w[1]), "{frames:?}");
+    eprintln!(
+        "recorded {recorded} of {FRAMES} frames in {:.1} s",
+        started.elapsed().as_secs_f64()
+    );
 
     let mut cones = Vec::new();
     for run in 1..=2 {
-        let (summary, path) = replay_once(&dir, &drive, run);
-        assert_eq!(summary["frames_published"], FRAMES);
-        assert_eq!(summary["cones_received"], FRAMES);
+        let (summary, path) = replay_once(&dir, &drive, run, recorded);
+        assert_eq!(summary["frames_published"], recorded);
+        assert_eq!(summary["cones_received"], recorded);
         assert_eq!(summary["frames_lost"], 0);
         cones.push(path);
     }
     let first = cones_of(&cones[0]);
     let second = cones_of(&cones[1]);
-    assert_eq!(first.len() as u64, FRAMES);
-    assert!(first.values().map(Vec::len).sum::<usize>() > FRAMES as usize);
+    assert_eq!(first.len() as u64, recorded);
+    assert!(first.values().map(Vec::len).sum::<usize>() > recorded as usize);
     assert!(first == second, "the two replays gave different cones");
 
     let (passed, report) = diff(&cones[0], &cones[1], &dir.join("diff-same"), "0");
     assert!(passed, "{report}");
     assert_eq!(report["zero_change"], true, "{report}");
-    assert_eq!(report["frames_compared"], FRAMES);
+    assert_eq!(report["frames_compared"], recorded);
     assert!(dir.join("diff-same/position_change_vs_range.png").is_file());
     assert!(dir.join("diff-same/count_change_per_frame.png").is_file());
 
