@@ -8,15 +8,19 @@
 //! - `demo`: the geometry demo and one rendered frame through keypoints + PnP ([`demo`]).
 //! - `sim`: the synthetic scene renderer ([`conesight_sim::cli`]).
 //! - `record`: the bus of a run into MCAP files ([`record_cmd`]).
+//! - `replay`: recorded frames and camera info back onto the bus ([`replay_cmd`]).
+//! - `diff`: the cones of two recordings compared by range band ([`diff_cmd`]).
 //! - `eval`: the paper's experiments on the held-out synthetic set ([`conesight_eval::cli`]);
 //!   `make eval` runs the same through the `conesight-eval` binary and writes the report.
 
 mod bev;
 mod demo;
 mod demo_frame;
+mod diff_cmd;
 mod keypoints_cmd;
 mod predict;
 mod record_cmd;
+mod replay_cmd;
 mod run;
 
 use clap::{Parser, Subcommand};
@@ -51,20 +55,29 @@ enum Command {
     Eval(conesight_eval::cli::EvalArgs),
     /// Record a run's bus (`conesight/<namespace>/**`) into MCAP files with protobuf schemas.
     Record(record_cmd::RecordArgs),
+    /// Replay recordings: their frames and camera info published into a fresh namespace, at
+    /// the recorded timing or paced on the pipeline's cones (`--as-fast-as-possible`).
+    Replay(replay_cmd::ReplayArgs),
+    /// Compare the cones of two recordings of the same drive, per range band; PNG plots.
+    Diff(diff_cmd::DiffArgs),
 }
 
 /// The git revision the binary was built from (`build.rs`; `unknown` outside a checkout).
 pub(crate) const GIT_REVISION: &str = env!("CONESIGHT_GIT_REVISION");
 
-fn main() -> anyhow::Result<()> {
+fn main() -> anyhow::Result<std::process::ExitCode> {
     let cli = Cli::parse();
     match cli.command {
-        Command::Run(args) => run::run(args),
-        Command::Predict(args) => predict::run(&args),
-        Command::Keypoints(args) => keypoints_cmd::run(&args),
-        Command::Demo(args) => demo::run(&args),
-        Command::Sim(args) => conesight_sim::cli::run(args),
-        Command::Eval(args) => conesight_eval::cli::run(&args),
-        Command::Record(args) => record_cmd::run(args),
+        Command::Run(args) => run::run(args)?,
+        Command::Predict(args) => predict::run(&args)?,
+        Command::Keypoints(args) => keypoints_cmd::run(&args)?,
+        Command::Demo(args) => demo::run(&args)?,
+        Command::Sim(args) => conesight_sim::cli::run(args)?,
+        Command::Eval(args) => conesight_eval::cli::run(&args)?,
+        Command::Record(args) => record_cmd::run(args)?,
+        Command::Replay(args) => replay_cmd::run(args)?,
+        // Exit status 1 when `--fail-above` is exceeded.
+        Command::Diff(args) => return diff_cmd::run(&args),
     }
+    Ok(std::process::ExitCode::SUCCESS)
 }

@@ -1,7 +1,7 @@
 //! `conesight record`: the bus of one run (`conesight/<namespace>/**`, or chosen streams) into
 //! MCAP files (`conesight_record`), until Ctrl-C or `--duration-s`; a progress line on stderr.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
@@ -106,11 +106,9 @@ async fn run_async(args: RecordArgs) -> anyhow::Result<()> {
         format!("conesight {}", env!("CARGO_PKG_VERSION")),
     );
     for model in &args.models {
-        let bytes = std::fs::read(model)
-            .with_context(|| format!("cannot read the model {} (--models)", model.display()))?;
         metadata.insert(
-            format!("model_size_bytes/{}", model.display()),
-            bytes.len().to_string(),
+            format!("model_sha256/{}", model.display()),
+            sha256_hex(model)?,
         );
     }
     let recorder = Recorder::start(&session, &topics, options)
@@ -160,4 +158,36 @@ async fn run_async(args: RecordArgs) -> anyhow::Result<()> {
             .join(", ")
     );
     Ok(())
+}
+
+/// The sha256 of a file, lowercase hex (as `sha256sum` prints it), read in blocks.
+pub(crate) fn sha256_hex(path: &Path) -> anyhow::Result<String> {
+    use sha2::Digest;
+    let mut file = std::fs::File::open(path)
+        .with_context(|| format!("cannot read the model {} (--models)", path.display()))?;
+    let mut hasher = sha2::Sha256::new();
+    std::io::copy(&mut file, &mut hasher)
+        .with_context(|| format!("cannot read the model {} (--models)", path.display()))?;
+    Ok(hasher
+        .finalize()
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The digest `sha256sum` prints for "abc\n".
+    #[test]
+    fn sha256_hex_matches_sha256sum() {
+        let path = std::env::temp_dir().join(format!("conesight-sha-{}", std::process::id()));
+        std::fs::write(&path, b"abc\n").unwrap();
+        assert_eq!(
+            sha256_hex(&path).unwrap(),
+            "edeaaff3f1774ad2888673770c6d64097e391bc362d7d6fb34982ddf0efd18cb"
+        );
+        std::fs::remove_file(&path).unwrap();
+    }
 }

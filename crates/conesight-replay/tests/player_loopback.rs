@@ -1,0 +1,144 @@
+//! The player on a real Zenoh session pair on loopback: a recording made under another
+//! namespace is published into the player's, at the recorded timing scaled by `--rate`, with
+//! camera and sequence kept and acquisition stamps in replay time.
+#![allow(clippy::unwrap_used, clippy::expect_used, missing_docs)]
+
+use std::sync::atomic::AtomicBool;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use conesight_bus::{Stream, declare_callback_subscriber, loopback_pair};
+use conesight_proto::{Message, now_ns, pb};
+use conesight_record::{McapSink, SinkOptions};
+use conesight_replay::{Pacing, Player, ReplayOptions, ReplayProgress};
+
+const STEP_NS: u64 = 100_000_000;
+
+fn write_drive(path: &std::path::Path) {
+    let mut sink = McapSink::create(path, SinkOptions::default()).unwrap();
+    let start_ns = 1_700_000_000_000_000_000_u64;
+    let info = pb::CameraInfo::new(
+        pb::Header::new("front", 0, start_ns, "front_optical"),
+        &conesight_core::Camera::paper_default(),
+        Some(&conesight_core::Extrinsics::paper_default()),
+    );
+    sink.write(
+        "conesight/recorded/ado/front/camera_info",
+        Stream::CameraInfo,
+        start_ns,
+        start_ns,
+        &info.encode_to_vec(),
+    )
+    .unwrap();
+    for sequence in 0..5_u64 {
+        let stamp = start_ns + sequence * STEP_NS;
+        let image = image::RgbImage::from_pixel(16, 8, image::Rgb([sequence as u8, 0, 0]));
+        let frame = pb::ImageFrame::from_rgb(
+            pb::Header::new("front", 10 + sequence, stamp, "front_optical"),
+            &image,
+        );
+        sink.write(
+            "conesight/recorded/ado/front/frame",
+            Stream::Frame,
+            stamp,
+            stamp,
+            &frame.encode_to_vec(),
+        )
+        .unwrap();
+    }
+    sink.finish().unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_recording_is_replayed_into_another_namespace_at_the_given_rate() {
+    let dir = std::env::temp_dir().join(format!("conesight-player-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let drive = dir.join("drive.mcap");
+    write_drive(&drive);
+    let (player_session, pipeline_session, topics) = loopback_pair("replayed").await.unwrap();
+    let frames: Arc<Mutex<Vec<(Instant, pb::Header)>>> = Arc::default();
+    let infos: Arc<Mutex<Vec<pb::Header>>> = Arc::default();
+    let sink = frames.clone();
+    let _frames_sub = declare_callback_subscriber(
+        &pipeline_session,
+        topics.key("front", Stream::Frame).unwrap(),
+        move |sample| {
+            let frame = pb::ImageFrame::decode(&sample.payload().to_bytes()[..]).unwrap();
+            assert_eq!(
+                frame.to_rgb().unwrap().get_pixel(0, 0)[0] as u64 + 10,
+                frame.header.as_ref().unwrap().frame_sequence
+            );
+            sink.lock()
+                .unwrap()
+                .push((Instant::now(), frame.header.unwrap()));
+        },
+    )
+    .await
+    .unwrap();
+    let info_sink = infos.clone();
+    let _infos_sub = declare_callback_subscriber(
+        &pipeline_session,
+        topics.key("front", Stream::CameraInfo).unwrap(),
+        move |sample| {
+            let info = pb::CameraInfo::decode(&sample.payload().to_bytes()[..]).unwrap();
+            info_sink.lock().unwrap().push(info.header.unwrap());
+        },
+    )
+    .await
+    .unwrap();
+    let options = ReplayOptions {
+        pacing: Pacing::Rate(2.0),
+        wait_for_subscribers: Duration::from_secs(10),
+        settle: Duration::from_millis(200),
+        drain: Duration::ZERO,
+        ..ReplayOptions::default()
+    };
+    let mut player = Player::new(&player_session, &topics, options)
+        .await
+        .unwrap();
+    let cameras = player.prepare(std::slice::from_ref(&drive)).await.unwrap();
+    assert_eq!(cameras, ["front"]);
+    let before_ns = now_ns();
+    let summary = player
+        .play(
+            std::slice::from_ref(&drive),
+            Arc::new(ReplayProgress::default()),
+            Arc::new(AtomicBool::new(false)),
+        )
+        .await
+        .unwrap();
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    assert_eq!(summary.frames_published, 5);
+    // No pipeline answers: every frame is lost, and said so.
+    assert_eq!(summary.frames_lost, 5);
+    assert_eq!(summary.cones_received, 0);
+    assert!(summary.truncated_files.is_empty());
+    // The first camera info primed before the frames, and the recorded one.
+    assert_eq!(summary.camera_info_published, 2);
+    assert_eq!(infos.lock().unwrap().len(), 2);
+    let frames = frames.lock().unwrap();
+    let sequences: Vec<u64> = frames.iter().map(|(_, h)| h.frame_sequence).collect();
+    assert_eq!(sequences, [10, 11, 12, 13, 14]);
+    for (_, header) in frames.iter() {
+        assert_eq!(header.camera_id, "front");
+        assert!(
+            header.acquisition_time_ns >= before_ns,
+            "stamped in replay time"
+        );
+    }
+    // Stamps 50 ms apart (100 ms recorded, rate 2), and so is the publishing.
+    for pair in frames.windows(2) {
+        let stamp_step = pair[1].1.acquisition_time_ns - pair[0].1.acquisition_time_ns;
+        assert!(
+            stamp_step.abs_diff(STEP_NS / 2) < 1_000_000,
+            "{stamp_step} ns"
+        );
+    }
+    let span = frames[4].0 - frames[0].0;
+    assert!(
+        span >= Duration::from_millis(180) && span < Duration::from_millis(800),
+        "{span:?}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
