@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Runs the steps of docs/on-your-car.md that need no hardware, on the sample frame in
 # docs/sample/: calibration and extrinsics files as the guide writes them, predict with an ego
-# mask, and the two-host split on loopback (camera + localiser as separate services, detector +
-# keypoints in `conesight run`) until the localiser has published cones. Exits non-zero on the
+# mask, the two-host split on loopback (camera + localiser as separate services, detector +
+# keypoints in `conesight run`) until the localiser has published cones, recorded by `conesight
+# record`, then replayed through a fresh pipeline and compared with `conesight diff`. Exits non-zero on the
 # first step that fails. `make test` runs it with PROFILE=debug (the test build's binaries);
 # by default it builds and uses the release binaries.
 set -euo pipefail
@@ -99,7 +100,8 @@ assert worst < 1e-6
 EOF
 done
 
-step "5. the split on loopback: camera + localiser services, detector + keypoints in conesight run"
+step "6. the split on loopback: camera + localiser services, detector + keypoints in conesight run;
+  7. recorded by conesight record"
 mkdir -p "$WORK/drive"
 cp docs/sample/frame.jpg "$WORK/drive/000000.jpg"
 PORT=$((17000 + RANDOM % 2000))
@@ -114,6 +116,10 @@ PIDS+=($!)
 conesight run --services detector,keypoints --zenoh-connect "tcp/127.0.0.1:$PORT" \
   --namespace onyourcar --frames 0 --out "$WORK/run" > "$WORK/run.log" 2>&1 &
 PIDS+=($!)
+conesight record --namespace onyourcar --zenoh-connect "tcp/127.0.0.1:$PORT" \
+  --out "$WORK/drive.mcap" > "$WORK/record.log" 2>&1 &
+RECORDER=$!
+PIDS+=($RECORDER)
 done_frames=0
 for _ in $(seq 1 120); do
   sleep 1
@@ -128,4 +134,22 @@ if [ "${done_frames%.*}" -lt 2 ]; then
   exit 1
 fi
 echo "localiser: ${done_frames} frames of cones from the split pipeline"
+sleep 1
+kill -INT "$RECORDER"
+wait "$RECORDER" || { echo "conesight record failed:" >&2; tail -n 20 "$WORK/record.log" >&2; exit 1; }
+for pid in "${PIDS[@]}"; do kill "$pid" 2>/dev/null || true; done
+wait 2>/dev/null || true
+PIDS=()
+
+step "7. replay the drive through the pipeline in a fresh namespace, record it, diff the runs"
+RPORT=$((PORT + 2))
+conesight run --services detector,keypoints,localiser --namespace onyourcar-replay \
+  --zenoh-listen "tcp/127.0.0.1:$RPORT" --frames 0 --out "$WORK/replay-run" \
+  > "$WORK/replay-run.log" 2>&1 &
+PIDS+=($!)
+conesight replay "$WORK/drive.mcap" --namespace onyourcar-replay \
+  --zenoh-connect "tcp/127.0.0.1:$RPORT" --as-fast-as-possible --record "$WORK/replay.mcap" \
+  || { echo "conesight replay failed; logs:" >&2; tail -n 20 "$WORK"/replay-run.log >&2; exit 1; }
+conesight diff "$WORK/drive.mcap" "$WORK/replay.mcap" --out "$WORK/diff"
+ls "$WORK/diff"/*.png > /dev/null
 step "done: the guide's steps ran"

@@ -107,8 +107,16 @@ async fn a_gstreamer_camera_that_ends_is_restarted_and_its_frames_give_cones() {
         received.len(),
         "one cones message per frame"
     );
+    // Frames of the first run and of a restarted one give cones. Not every frame: the
+    // detector's slot of 1 drops frames it cannot keep up with (15 fps in a debug build on a
+    // busy 2-core machine gave cones for 11 of 33 once).
     assert!(
-        sequences.len() as u64 >= RUN_FRAMES,
+        sequences.first().is_some_and(|s| *s < RUN_FRAMES)
+            && sequences.last().is_some_and(|s| *s >= RUN_FRAMES),
+        "no cones from both the first and a restarted run: {sequences:?}"
+    );
+    assert!(
+        sequences.len() >= 5,
         "cones messages for {} frames",
         sequences.len()
     );
