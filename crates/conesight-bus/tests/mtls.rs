@@ -288,3 +288,57 @@ async fn a_tcp_endpoint_beside_mtls_is_refused() {
     assert!(error.to_string().contains("connect/endpoints"), "{error}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_recorder_gets_the_whole_run_and_the_detector_only_what_it_may_read() {
+    let Some(dir) = certs_and_configs("recorder") else {
+        return;
+    };
+    let port = free_port();
+    let listen = format!("tls/127.0.0.1:{port}");
+    // The camera keeps its list: it sends each peer only what that peer may read.
+    let camera = open(node_config(&dir, "camera", &listen, None)).await;
+    let recorder = open(node_config(
+        &dir,
+        "recorder",
+        "tls/127.0.0.1:0",
+        Some(&listen),
+    ))
+    .await;
+    let whole_run = collect(&recorder, &format!("conesight/{NAMESPACE}/**")).await;
+    assert!(
+        put_until(&camera, key("frame"), "frame", &whole_run, ARRIVAL_TIMEOUT).await,
+        "the recorder never got the camera's frames"
+    );
+    // A detector that asks for camera_info (not its input) is sent none.
+    let detector = open(without_own_acl(node_config(
+        &dir,
+        "detector",
+        "tls/127.0.0.1:0",
+        Some(&listen),
+    )))
+    .await;
+    let frames_seen_by_detector = collect(&detector, &key("frame")).await;
+    let info_seen_by_detector = collect(&detector, &key("camera_info")).await;
+    assert!(
+        put_until(
+            &camera,
+            key("frame"),
+            "frame 2",
+            &frames_seen_by_detector,
+            ARRIVAL_TIMEOUT
+        )
+        .await
+    );
+    assert!(
+        !put_until(
+            &camera,
+            key("camera_info"),
+            "info",
+            &info_seen_by_detector,
+            SILENCE
+        )
+        .await
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
