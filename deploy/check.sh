@@ -34,13 +34,20 @@ cases=(
     "docker-compose.yml||CONESIGHT_CAMERA_FLAGS=--publish-boxes"
     "deploy/compose.split.yml|jetson|"
     "deploy/compose.split.yml|carpc|JETSON_ADDR=192.0.2.10"
+    "docker-compose.yml:deploy/compose.mtls.yml||"
+    "docker-compose.yml:deploy/compose.mtls.yml|tools|"
+    "deploy/compose.split.yml:deploy/compose.split.mtls.yml|jetson|"
+    "deploy/compose.split.yml:deploy/compose.split.mtls.yml|carpc|JETSON_ADDR=192.0.2.10"
 )
 if [[ ${#compose[@]} -eq 0 ]]; then
     skip "compose validation (no docker compose / docker-compose)"
 else
     for c in "${cases[@]}"; do
         IFS='|' read -r file profile extra <<<"$c"
-        args=(-p conesight -f "$file")
+        # file may be BASE:OVERRIDE (an override such as deploy/compose.mtls.yml on its base).
+        args=(-p conesight)
+        IFS=':' read -r -a files <<<"$file"
+        for f in "${files[@]}"; do args+=(-f "$f"); done
         [[ -n "$profile" ]] && args+=(--profile "$profile")
         if env ${extra:+"$extra"} "${compose[@]}" "${args[@]}" config -q; then
             ok "${compose[*]} config: $file ${profile:+(profile $profile)}"
@@ -78,7 +85,7 @@ done
 
 # --- scripts ----------------------------------------------------------------------------------
 if command -v shellcheck >/dev/null; then
-    if shellcheck deploy/*.sh; then ok "shellcheck deploy/*.sh"; else fail "shellcheck deploy/*.sh"; fi
+    if shellcheck deploy/*.sh deploy/zenoh/*.sh; then ok "shellcheck deploy/*.sh deploy/zenoh/*.sh"; else fail "shellcheck deploy/*.sh deploy/zenoh/*.sh"; fi
 else
     skip "shellcheck (not installed)"
 fi

@@ -35,6 +35,8 @@ log() { printf '[setup] %s\n' "$*"; }
 # --- Debian packages (only what pip wheels and the Rust build cannot bring) -----------------
 need_apt=()
 command -v unzip >/dev/null 2>&1 || need_apt+=(unzip)
+# openssl: deploy/certs.sh (the mTLS CA and node certificates) and its tests.
+command -v openssl >/dev/null 2>&1 || need_apt+=(openssl)
 "$PYTHON" -c 'import venv, ensurepip' >/dev/null 2>&1 || need_apt+=(python3-venv)
 # GStreamer, for the camera sources `gst:PIPELINE` and `video:PATH` (the camera service and the
 # CLI link it): headers and pkg-config to build, the base and good plugins to run (videotestsrc,

@@ -26,6 +26,17 @@ pub enum BusError {
         #[source]
         source: zenoh::Error,
     },
+    /// The config asks for authentication or access control this build cannot enforce
+    /// ([`crate::security::check_enforceable`]); refused rather than silently ignored.
+    #[error("Zenoh config {key} {problem}; fix: {fix}")]
+    Unenforceable {
+        /// The config key at fault, e.g. `transport/auth/usrpwd`.
+        key: &'static str,
+        /// What is wrong with it.
+        problem: String,
+        /// What to do instead.
+        fix: &'static str,
+    },
     /// The session could not be opened (e.g. a listen endpoint is taken).
     #[error("cannot open the Zenoh session: {source}")]
     Open {

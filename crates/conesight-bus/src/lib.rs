@@ -18,6 +18,8 @@
 //!   memory when it has a pool (how the camera publishes raw frames); [`PixelSlice`], pixels
 //!   kept in the pool and published again behind new headers without a copy (looped frames);
 //!   [`in_shared_memory`].
+//! - [`security`]: [`check_enforceable`], which refuses auth and access-control settings this
+//!   build cannot honour (usrpwd without the feature, tcp links beside mTLS, an empty ACL).
 //! - [`error`]: [`BusError`] and [`DecodeError`].
 //!
 //! Entry point: `open_session(&args).await`, then `Topics::from_args(&args)?` and
@@ -28,6 +30,7 @@ pub mod codec;
 pub mod error;
 pub mod payload;
 pub mod qos;
+pub mod security;
 pub mod session;
 pub mod topics;
 
@@ -43,6 +46,7 @@ pub use qos::{
     RingSubscriber, StreamQos, declare_callback_subscriber, declare_publisher, declare_subscriber,
     publish, publish_payload,
 };
+pub use security::check_enforceable;
 pub use session::{loopback_pair, open_session, shm_pool_bytes, zenoh_config};
 pub use topics::{Stream, Topics};
 

@@ -4,6 +4,7 @@ use zenoh::{Config, Session};
 
 use crate::args::{ZenohArgs, ZenohMode};
 use crate::error::BusError;
+use crate::security::check_enforceable;
 use crate::topics::Topics;
 
 /// Shared-memory pool of a session without a config file, MiB: nine raw 1920x1200 RGB8 frames
@@ -14,7 +15,8 @@ pub const DEFAULT_SHM_POOL_MB: usize = 64;
 /// The Zenoh config of `args`: the config file (or Zenoh's defaults), then the flags given on
 /// top: mode (peer without a file), endpoints, multicast scouting (off without a file) and
 /// shared memory (Zenoh's default, on, unless turned off) with a pool of `--zenoh-shm-pool-mb`
-/// ([`DEFAULT_SHM_POOL_MB`] without a file).
+/// ([`DEFAULT_SHM_POOL_MB`] without a file). Auth or access-control settings this build cannot
+/// enforce are refused ([`check_enforceable`], [`BusError::Unenforceable`]).
 pub fn zenoh_config(args: &ZenohArgs) -> Result<Config, BusError> {
     let mut config = match &args.config {
         Some(path) => Config::from_file(path).map_err(|source| BusError::ConfigFile {
@@ -73,6 +75,7 @@ pub fn zenoh_config(args: &ZenohArgs) -> Result<Config, BusError> {
             bytes.max(1 << 16).to_string(),
         )?;
     }
+    check_enforceable(&config)?;
     Ok(config)
 }
 

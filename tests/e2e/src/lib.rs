@@ -122,6 +122,8 @@ pub struct Cluster {
     members: BTreeMap<String, Member>,
     /// Extra Zenoh port for an observer session.
     pub observer_port: u16,
+    /// Per-node mTLS configs (`deploy/zenoh/mtls.sh`), when every link is `tls/`.
+    mtls: Option<PathBuf>,
 }
 
 impl Cluster {
@@ -149,11 +151,21 @@ impl Cluster {
             namespace: namespace.to_owned(),
             members,
             observer_port: free_port()?,
+            mtls: None,
         })
     }
 
-    fn endpoint(port: u16) -> String {
-        format!("tcp/127.0.0.1:{port}")
+    /// Every link on mTLS with the access-control list: each service runs with
+    /// `zenoh_dir/<service>.json5` (from `deploy/zenoh/mtls.sh`) and `tls/` endpoints; the
+    /// observer holds the dashboard's certificate.
+    pub fn with_mtls(mut self, zenoh_dir: &Path) -> Self {
+        self.mtls = Some(zenoh_dir.to_path_buf());
+        self
+    }
+
+    fn endpoint(&self, port: u16) -> String {
+        let scheme = if self.mtls.is_some() { "tls" } else { "tcp" };
+        format!("{scheme}/127.0.0.1:{port}")
     }
 
     /// Every endpoint except `port`'s.
@@ -163,7 +175,7 @@ impl Cluster {
             .map(|m| m.zenoh_port)
             .chain([self.observer_port])
             .filter(|p| *p != port)
-            .map(Self::endpoint)
+            .map(|p| self.endpoint(p))
             .collect::<Vec<_>>()
             .join(",")
     }
@@ -178,7 +190,7 @@ impl Cluster {
         command
             .arg(name)
             .arg("--zenoh-listen")
-            .arg(Self::endpoint(member.zenoh_port))
+            .arg(self.endpoint(member.zenoh_port))
             .arg("--zenoh-connect")
             .arg(self.others(member.zenoh_port))
             .arg("--http-addr")
@@ -186,6 +198,11 @@ impl Cluster {
             .arg("--namespace")
             .arg(&self.namespace)
             .args(&member.extra)
+            .args(
+                self.mtls
+                    .iter()
+                    .flat_map(|dir| ["--zenoh-config".into(), dir.join(format!("{name}.json5"))]),
+            )
             .stdin(Stdio::null())
             .stdout(Stdio::null());
         if std::env::var_os("CONESIGHT_E2E_LOGS").is_none() {
@@ -322,12 +339,13 @@ impl Cluster {
     /// Zenoh args of an observer session joining the cluster.
     pub fn observer_args(&self) -> ZenohArgs {
         ZenohArgs {
-            listen: vec![Self::endpoint(self.observer_port)],
+            listen: vec![self.endpoint(self.observer_port)],
             connect: self
                 .members
                 .values()
-                .map(|m| Self::endpoint(m.zenoh_port))
+                .map(|m| self.endpoint(m.zenoh_port))
                 .collect(),
+            config: self.mtls.as_ref().map(|dir| dir.join("dashboard.json5")),
             namespace: self.namespace.clone(),
             ..ZenohArgs::default()
         }
@@ -364,6 +382,29 @@ pub fn http_get(port: u16, path: &str) -> anyhow::Result<(u16, String)> {
         .map(|(_, b)| b.to_owned())
         .unwrap_or_default();
     Ok((status, body))
+}
+
+/// Certificates (`deploy/certs.sh`) and per-node mTLS configs (`deploy/zenoh/mtls.sh`) in a
+/// fresh directory under the temp dir; the configs' directory, or `None` without `openssl`.
+pub fn mtls_configs(name: &str) -> anyhow::Result<Option<PathBuf>> {
+    if Command::new("openssl").arg("version").output().is_err() {
+        return Ok(None);
+    }
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let dir =
+        std::env::temp_dir().join(format!("conesight-e2e-mtls-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    for (script, args) in [
+        ("deploy/certs.sh", vec![dir.join("certs")]),
+        (
+            "deploy/zenoh/mtls.sh",
+            vec![dir.join("certs"), dir.join("zenoh")],
+        ),
+    ] {
+        let output = Command::new(root.join(script)).args(&args).output()?;
+        anyhow::ensure!(output.status.success(), "{script}: {output:?}");
+    }
+    Ok(Some(dir.join("zenoh")))
 }
 
 /// One `Cones` message as received.

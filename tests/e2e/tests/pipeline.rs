@@ -377,3 +377,48 @@ async fn overload_and_slow_consumer_keep_memory_bounded_and_frames_fresh() {
         );
     }
 }
+
+/// The pipeline at 10 Hz with every link on mTLS and the access-control list of
+/// `deploy/zenoh/mtls.sh` (certificates from `deploy/certs.sh`), then the same on the plain bus:
+/// cones within the model's accuracy under mTLS, and the bus cost printed (acquisition to
+/// observer latency, median and p90; a benchmark figure, not asserted). Skipped without openssl.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn pipeline_at_10_hz_on_mtls_and_its_cost_against_the_plain_bus() {
+    let _one_at_a_time = one_cluster_at_a_time().await;
+    let Some(zenoh_dir) = conesight_e2e::mtls_configs("pipeline").unwrap() else {
+        eprintln!("SKIPPED: openssl is not installed (apt-get install openssl)");
+        return;
+    };
+    let fixture = Fixture::render("mtls", 2).unwrap();
+    let mut latencies = Vec::new();
+    for mtls in [true, false] {
+        let namespace = if mtls { "e2e-mtls" } else { "e2e-plain" };
+        let mut cluster = cluster(&fixture, namespace, 10.0, &[], &[]);
+        if mtls {
+            cluster = cluster.with_mtls(&zenoh_dir);
+        }
+        let (_observer, received) = start_and_collect(&mut cluster, 40).await;
+        let shm = cluster.metric("keypoints", "conesight_shared_memory_messages_total");
+        if mtls {
+            assert_within_model_accuracy(&fixture, &received, "mTLS with access control");
+        }
+        // Skip the first messages (links and declarations settling).
+        let latency: Vec<f64> = received.iter().skip(10).map(|r| r.latency_secs).collect();
+        let p50 = median(&latency).unwrap_or(f64::NAN);
+        let p90 = percentile(&latency, 90.0).unwrap_or(f64::NAN);
+        println!(
+            "bus {}: {} cones messages, latency acquisition->observer median {:.1} ms p90 {:.1} ms; keypoints inputs in shared memory {shm}",
+            if mtls { "mTLS+ACL" } else { "plain tcp" },
+            received.len(),
+            p50 * 1e3,
+            p90 * 1e3
+        );
+        latencies.push((p50, p90));
+    }
+    println!(
+        "mTLS bus cost: median {:+.1} ms, p90 {:+.1} ms (mTLS minus plain, one run each)",
+        (latencies[0].0 - latencies[1].0) * 1e3,
+        (latencies[0].1 - latencies[1].1) * 1e3
+    );
+    let _ = std::fs::remove_dir_all(zenoh_dir.parent().unwrap());
+}
