@@ -83,6 +83,22 @@ impl Fixture {
         })
     }
 
+    /// The camera service's arguments to publish this folder at `rate_hz`, calibrated.
+    pub fn camera_args(&self, rate_hz: f64) -> Vec<String> {
+        vec![
+            "--source".to_owned(),
+            "folder".to_owned(),
+            "--images".to_owned(),
+            self.dir.display().to_string(),
+            "--camera-info".to_owned(),
+            self.camera_yaml.display().to_string(),
+            "--extrinsics".to_owned(),
+            self.extrinsics_yaml.display().to_string(),
+            "--rate-hz".to_owned(),
+            rate_hz.to_string(),
+        ]
+    }
+
     /// The frame published as `sequence`.
     pub fn frame(&self, sequence: u64) -> Option<&SourceFrame> {
         self.frames
@@ -587,4 +603,38 @@ pub fn memory_lockable(bytes: u64) -> bool {
         .and_then(|l| l.split_whitespace().nth(3))
         .is_some_and(|soft| soft == "unlimited" || soft.parse::<u64>().is_ok_and(|b| b >= bytes));
     cap_ipc_lock || limit_ok
+}
+
+/// Publishers on every input stream of one camera, for a test that plays a peer feeding the
+/// services by hand.
+pub struct Inputs {
+    /// `frame`.
+    pub frames: conesight_bus::zenoh::pubsub::Publisher<'static>,
+    /// `detections`.
+    pub detections: conesight_bus::zenoh::pubsub::Publisher<'static>,
+    /// `keypoints`.
+    pub keypoints: conesight_bus::zenoh::pubsub::Publisher<'static>,
+    /// `camera_info`.
+    pub camera_info: conesight_bus::zenoh::pubsub::Publisher<'static>,
+}
+
+impl Inputs {
+    /// Declares the four publishers on `session` in `namespace` (vehicle `car`), then waits
+    /// 2 s for the declarations to reach the services.
+    pub async fn declare(
+        session: &conesight_bus::zenoh::Session,
+        namespace: &str,
+        camera: &str,
+    ) -> anyhow::Result<Self> {
+        use conesight_bus::declare_publisher;
+        let topics = Topics::new(namespace, "car")?;
+        let inputs = Self {
+            frames: declare_publisher(session, &topics, camera, Stream::Frame).await?,
+            detections: declare_publisher(session, &topics, camera, Stream::Detections).await?,
+            keypoints: declare_publisher(session, &topics, camera, Stream::Keypoints).await?,
+            camera_info: declare_publisher(session, &topics, camera, Stream::CameraInfo).await?,
+        };
+        tokio::time::sleep(Duration::from_secs(2)).await;
+        Ok(inputs)
+    }
 }

@@ -8,11 +8,11 @@
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
+use conesight_bus::encode;
 use conesight_bus::zenoh::Wait;
 use conesight_bus::zenoh::bytes::ZBytes;
-use conesight_bus::{Stream, Topics, declare_publisher, encode};
 use conesight_core::ConeClass;
-use conesight_e2e::{Cluster, Fixture, Observer};
+use conesight_e2e::{Cluster, Fixture, Inputs, Observer};
 use conesight_pipeline::locate_detector;
 use conesight_proto::{ConeDetection, now_ns, pb};
 use conesight_vision::PixelBox;
@@ -68,22 +68,14 @@ async fn bad_input_is_counted_by_kind_and_survived() {
         .unwrap();
     cluster.spawn_all().unwrap();
     cluster.wait_live(Duration::from_secs(30)).unwrap();
-    let session = &observer.session;
-    let topics = Topics::new(&cluster.namespace, "car").unwrap();
-    let frames = declare_publisher(session, &topics, "front", Stream::Frame)
+    let Inputs {
+        frames,
+        detections,
+        keypoints,
+        camera_info: info,
+    } = Inputs::declare(&observer.session, &cluster.namespace, "front")
         .await
         .unwrap();
-    let detections = declare_publisher(session, &topics, "front", Stream::Detections)
-        .await
-        .unwrap();
-    let keypoints = declare_publisher(session, &topics, "front", Stream::Keypoints)
-        .await
-        .unwrap();
-    let info = declare_publisher(session, &topics, "front", Stream::CameraInfo)
-        .await
-        .unwrap();
-    // Let the declarations reach the services.
-    tokio::time::sleep(Duration::from_secs(2)).await;
     let pause = || tokio::time::sleep(Duration::from_millis(150));
 
     // Keypoints before any camera info: the localiser cannot place them.

@@ -41,18 +41,7 @@ fn cluster(
     extra_all: &[&str],
 ) -> Cluster {
     let detector = trained_detector();
-    let mut camera = vec![
-        "--source".to_owned(),
-        "folder".to_owned(),
-        "--images".to_owned(),
-        fixture.dir.display().to_string(),
-        "--camera-info".to_owned(),
-        fixture.camera_yaml.display().to_string(),
-        "--extrinsics".to_owned(),
-        fixture.extrinsics_yaml.display().to_string(),
-        "--rate-hz".to_owned(),
-        rate_hz.to_string(),
-    ];
+    let mut camera = fixture.camera_args(rate_hz);
     camera.extend(extra_camera.iter().map(|s| (*s).to_owned()));
     let mut services = vec![
         (

@@ -17,20 +17,9 @@ const STOPPED: Duration = Duration::from_secs(5);
 async fn a_stopped_subscriber_stalls_no_publisher() {
     let _one = one_cluster_at_a_time().await;
     let fixture = Fixture::render("stall", 3).unwrap();
-    let camera = vec![
-        "--source".to_owned(),
-        "folder".to_owned(),
-        "--images".to_owned(),
-        fixture.dir.display().to_string(),
-        "--camera-info".to_owned(),
-        fixture.camera_yaml.display().to_string(),
-        "--extrinsics".to_owned(),
-        fixture.extrinsics_yaml.display().to_string(),
-        "--rate-hz".to_owned(),
-        RATE_HZ.to_string(),
-        // Exact boxes from the labels: this test is about the bus, not the detector.
-        "--publish-boxes".to_owned(),
-    ];
+    let mut camera = fixture.camera_args(RATE_HZ);
+    // Exact boxes from the labels: this test is about the bus, not the detector.
+    camera.push("--publish-boxes".to_owned());
     let services = vec![
         ("camera", camera),
         (

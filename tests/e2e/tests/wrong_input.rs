@@ -9,9 +9,9 @@
 use std::path::Path;
 use std::time::Duration;
 
+use conesight_bus::encode;
 use conesight_bus::zenoh::Wait;
-use conesight_bus::{Stream, Topics, declare_publisher, encode};
-use conesight_e2e::{Cluster, Fixture, Observer};
+use conesight_e2e::{Cluster, Fixture, Inputs, Observer};
 use conesight_proto::{now_ns, pb};
 
 const EXE: &str = env!("CARGO_BIN_EXE_conesight-e2e-services");
@@ -32,21 +32,14 @@ async fn wrong_inputs_are_counted_and_never_published() {
         .unwrap();
     cluster.spawn_all().unwrap();
     cluster.wait_live(Duration::from_secs(30)).unwrap();
-    let session = &observer.session;
-    let topics = Topics::new(&cluster.namespace, "car").unwrap();
-    let frames = declare_publisher(session, &topics, "front", Stream::Frame)
+    let Inputs {
+        frames,
+        detections,
+        keypoints,
+        camera_info: info,
+    } = Inputs::declare(&observer.session, &cluster.namespace, "front")
         .await
         .unwrap();
-    let detections = declare_publisher(session, &topics, "front", Stream::Detections)
-        .await
-        .unwrap();
-    let keypoints = declare_publisher(session, &topics, "front", Stream::Keypoints)
-        .await
-        .unwrap();
-    let info = declare_publisher(session, &topics, "front", Stream::CameraInfo)
-        .await
-        .unwrap();
-    tokio::time::sleep(Duration::from_secs(2)).await;
 
     let good = fixture.frame(0).unwrap();
     let size = (good.camera.width_px, good.camera.height_px);

@@ -217,20 +217,7 @@ async fn main() -> anyhow::Result<()> {
     let in_process_p50 = median(&total).unwrap_or(f64::NAN);
 
     // Over Zenoh: four processes on loopback.
-    let camera_args = |rate: f64| {
-        vec![
-            "--source".to_owned(),
-            "folder".to_owned(),
-            "--images".to_owned(),
-            fixture.dir.display().to_string(),
-            "--camera-info".to_owned(),
-            fixture.camera_yaml.display().to_string(),
-            "--extrinsics".to_owned(),
-            fixture.extrinsics_yaml.display().to_string(),
-            "--rate-hz".to_owned(),
-            rate.to_string(),
-        ]
-    };
+    let camera_args = |rate: f64| fixture.camera_args(rate);
     let mut cluster = Cluster::new(
         &exe,
         &format!("bench-{}", std::process::id()),
