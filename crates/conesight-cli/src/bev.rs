@@ -220,18 +220,26 @@ pub fn write_bev_png(
             }))?
             .label("estimate")
             .legend(|(x, y)| Cross::new((x + 9, y), 5, BLACK.stroke_width(2)));
-        chart
-            .configure_series_labels()
-            // Outside the camera's view, where no cone is ever drawn.
-            .position(SeriesLabelPosition::LowerRight)
-            .label_font(("sans-serif", 15))
-            .background_style(WHITE.mix(0.85))
-            .border_style(RGBColor(160, 160, 160))
-            .draw()?;
+        // Outside the camera's view, where no cone is ever drawn.
+        draw_legend(&mut chart, SeriesLabelPosition::LowerRight)?;
         root.present()?;
         Ok(())
     };
     draw().map_err(|e| anyhow::anyhow!("cannot write {}: {e}", path.display()))
+}
+
+/// The legend of every conesight plot: the series' labels at `position`, on a light box.
+pub(crate) fn draw_legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(
+    chart: &mut ChartContext<'a, DB, CT>,
+    position: SeriesLabelPosition,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    chart
+        .configure_series_labels()
+        .position(position)
+        .label_font(("sans-serif", 15))
+        .background_style(WHITE.mix(0.85))
+        .border_style(RGBColor(160, 160, 160))
+        .draw()
 }
 
 #[cfg(test)]

@@ -198,13 +198,7 @@ fn plot_changes(path: &Path, report: &DiffReport) -> anyhow::Result<()> {
                 .label(format!("95th percentile, all ranges ({p95:.3} m)"))
                 .legend(move |(x, y)| PathElement::new([(x, y), (x + 18, y)], red.stroke_width(2)));
         }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperLeft)
-            .label_font(("sans-serif", 15))
-            .background_style(WHITE.mix(0.85))
-            .border_style(RGBColor(160, 160, 160))
-            .draw()?;
+        crate::bev::draw_legend(&mut chart, SeriesLabelPosition::UpperLeft)?;
         root.present()?;
         Ok(())
     };
@@ -252,13 +246,7 @@ fn plot_counts(path: &Path, report: &DiffReport) -> anyhow::Result<()> {
                 report.frames_with_count_change, report.frames_compared
             ))
             .legend(move |(x, y)| Circle::new((x + 9, y), 4, orange.filled()));
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
-            .label_font(("sans-serif", 15))
-            .background_style(WHITE.mix(0.85))
-            .border_style(RGBColor(160, 160, 160))
-            .draw()?;
+        crate::bev::draw_legend(&mut chart, SeriesLabelPosition::UpperRight)?;
         root.present()?;
         Ok(())
     };

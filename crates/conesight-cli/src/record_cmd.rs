@@ -151,13 +151,14 @@ async fn run_async(args: RecordArgs) -> anyhow::Result<()> {
         stats.bytes.load(Ordering::Relaxed) as f64 / 1e6,
         stats.dropped.load(Ordering::Relaxed),
         started.elapsed().as_secs_f64(),
-        files
-            .iter()
-            .map(|p| p.display().to_string())
-            .collect::<Vec<_>>()
-            .join(", ")
+        display_paths(&files).join(", ")
     );
     Ok(())
+}
+
+/// Each path as the user reads it.
+pub(crate) fn display_paths(paths: &[std::path::PathBuf]) -> Vec<String> {
+    paths.iter().map(|p| p.display().to_string()).collect()
 }
 
 /// The sha256 of a file, lowercase hex (as `sha256sum` prints it), read in blocks.

@@ -173,11 +173,7 @@ async fn run_async(args: ReplayArgs) -> anyhow::Result<()> {
     if args.json {
         let mut value = serde_json::to_value(&summary)?;
         value["frames_per_s"] = summary.frames_per_s().into();
-        value["recorded"] = recorded
-            .iter()
-            .map(|p| p.display().to_string())
-            .collect::<Vec<_>>()
-            .into();
+        value["recorded"] = crate::record_cmd::display_paths(&recorded).into();
         println!("{value}");
     } else {
         println!(
@@ -192,11 +188,7 @@ async fn run_async(args: ReplayArgs) -> anyhow::Result<()> {
         if !recorded.is_empty() {
             println!(
                 "recorded: {}",
-                recorded
-                    .iter()
-                    .map(|p| p.display().to_string())
-                    .collect::<Vec<_>>()
-                    .join(", ")
+                crate::record_cmd::display_paths(&recorded).join(", ")
             );
         }
     }
