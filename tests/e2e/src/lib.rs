@@ -233,6 +233,15 @@ impl Cluster {
         Ok(())
     }
 
+    /// Starts an [`Observer`] of `camera`'s cones, then every service, and waits (30 s at
+    /// most) until each answers `/livez`.
+    pub async fn start_observed(&mut self, camera: &str) -> anyhow::Result<Observer> {
+        let observer = Observer::start(&self.observer_args(), camera).await?;
+        self.spawn_all()?;
+        self.wait_live(Duration::from_secs(30))?;
+        Ok(observer)
+    }
+
     /// Replaces the extra arguments `name` gets at its next start.
     pub fn set_args(&mut self, name: &str, extra: Vec<String>) {
         if let Some(member) = self.members.get_mut(name) {

@@ -12,7 +12,7 @@ use conesight_bus::encode;
 use conesight_bus::zenoh::Wait;
 use conesight_bus::zenoh::bytes::ZBytes;
 use conesight_core::ConeClass;
-use conesight_e2e::{Cluster, Fixture, Inputs, Observer};
+use conesight_e2e::{Cluster, Fixture, Inputs};
 use conesight_pipeline::locate_detector;
 use conesight_proto::{ConeDetection, now_ns, pb};
 use conesight_vision::PixelBox;
@@ -63,11 +63,7 @@ async fn bad_input_is_counted_by_kind_and_survived() {
         );
     }
     let mut cluster = Cluster::new(Path::new(EXE), "e2e-bad-input", &services).unwrap();
-    let observer = Observer::start(&cluster.observer_args(), "front")
-        .await
-        .unwrap();
-    cluster.spawn_all().unwrap();
-    cluster.wait_live(Duration::from_secs(30)).unwrap();
+    let observer = cluster.start_observed("front").await.unwrap();
     let Inputs {
         frames,
         detections,

@@ -93,11 +93,7 @@ fn errors(fixture: &Fixture, received: &[Received]) -> (Vec<f64>, usize, usize) 
 
 /// Starts every service of `cluster`, waits for `count` cones messages and returns them.
 async fn start_and_collect(cluster: &mut Cluster, count: usize) -> (Observer, Vec<Received>) {
-    let observer = Observer::start(&cluster.observer_args(), "front")
-        .await
-        .unwrap();
-    cluster.spawn_all().unwrap();
-    cluster.wait_live(Duration::from_secs(30)).unwrap();
+    let observer = cluster.start_observed("front").await.unwrap();
     assert!(
         observer
             .wait_for(Duration::from_secs(60), |r| r.len() >= count)

@@ -10,7 +10,7 @@ use std::path::Path;
 use std::time::{Duration, Instant};
 
 use conesight_core::Camera;
-use conesight_e2e::{Cluster, Observer, one_cluster_at_a_time};
+use conesight_e2e::{Cluster, one_cluster_at_a_time};
 use conesight_pipeline::locate_detector;
 
 const EXE: &str = env!("CARGO_BIN_EXE_conesight-e2e-services");
@@ -55,11 +55,7 @@ async fn a_gstreamer_camera_that_ends_is_restarted_and_its_frames_give_cones() {
         ("localiser", Vec::new()),
     ];
     let mut cluster = Cluster::new(Path::new(EXE), "e2e-gst", &services).unwrap();
-    let observer = Observer::start(&cluster.observer_args(), "front")
-        .await
-        .unwrap();
-    cluster.spawn_all().unwrap();
-    cluster.wait_live(Duration::from_secs(30)).unwrap();
+    let observer = cluster.start_observed("front").await.unwrap();
 
     // Until the third run of the pipeline has given cones, watching /readyz.
     let (mut ready_seen, mut down_seen) = (false, false);

@@ -7,7 +7,7 @@
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-use conesight_e2e::{Cluster, Fixture, Observer, one_cluster_at_a_time};
+use conesight_e2e::{Cluster, Fixture, one_cluster_at_a_time};
 
 const EXE: &str = env!("CARGO_BIN_EXE_conesight-e2e-services");
 const RATE_HZ: f64 = 10.0;
@@ -39,11 +39,7 @@ async fn a_stopped_subscriber_stalls_no_publisher() {
         })
         .collect();
     let mut cluster = Cluster::new(Path::new(EXE), "e2e-stall", &services).unwrap();
-    let observer = Observer::start(&cluster.observer_args(), "front")
-        .await
-        .unwrap();
-    cluster.spawn_all().unwrap();
-    cluster.wait_live(Duration::from_secs(30)).unwrap();
+    let observer = cluster.start_observed("front").await.unwrap();
     assert!(
         observer
             .wait_for(Duration::from_secs(60), |r| r.len() >= 10)

@@ -11,7 +11,7 @@ use std::time::Duration;
 
 use conesight_bus::encode;
 use conesight_bus::zenoh::Wait;
-use conesight_e2e::{Cluster, Fixture, Inputs, Observer};
+use conesight_e2e::{Cluster, Fixture, Inputs};
 use conesight_proto::{now_ns, pb};
 
 const EXE: &str = env!("CARGO_BIN_EXE_conesight-e2e-services");
@@ -27,11 +27,7 @@ async fn wrong_inputs_are_counted_and_never_published() {
     let fixture = Fixture::render("wrong-input", 1).unwrap();
     let services = vec![("keypoints", Vec::new()), ("localiser", Vec::new())];
     let mut cluster = Cluster::new(Path::new(EXE), "e2e-wrong-input", &services).unwrap();
-    let observer = Observer::start(&cluster.observer_args(), "front")
-        .await
-        .unwrap();
-    cluster.spawn_all().unwrap();
-    cluster.wait_live(Duration::from_secs(30)).unwrap();
+    let observer = cluster.start_observed("front").await.unwrap();
     let Inputs {
         frames,
         detections,
