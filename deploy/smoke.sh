@@ -107,7 +107,7 @@ echo "smoke.sh: all healthy after $((SECONDS - start))s"
 
 processed() { # port
     curl -fsS "http://127.0.0.1:$1/metrics" |
-        sed -n 's/^conesight_frames_processed_total \([0-9.e+]*\)$/\1/p' | head -n1
+        sed -n 's/^conesight_frames_processed_total\({[^}]*}\)\{0,1\} \([0-9.e+]*\)$/\2/p' | head -n1
 }
 
 declare -A first

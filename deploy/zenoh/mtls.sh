@@ -16,6 +16,7 @@
 #   localiser  cones                                     keypoints, camera_info
 #   recorder   -                                         everything (and may query)
 #   dashboard  -                                         everything (and may query)
+# Every node announces itself (liveliness token, queryables); only observers get replies.
 # Ingress rules say what a node accepts from a peer (keyed by the peer's CN); egress rules say what
 # a node sends to a peer (a put only on the keys that peer may read).
 set -euo pipefail
@@ -31,6 +32,8 @@ nodes=("$@")
 mkdir -p "$out"
 
 key() { printf '"conesight/*/*/*/%s"' "$1"; }
+# Services announce themselves under the verbatim chunk @service, which no `**` matches.
+services_key='"conesight/*/*/@service/**"'
 acl() {
   cat <<EOF
   access_control: {
@@ -55,7 +58,7 @@ acl() {
       { id: "localiser_reads", messages: ["declare_subscriber"], flows: ["ingress"], permission: "allow",
         key_exprs: [$(key keypoints), $(key camera_info)] },
       { id: "observer_reads", messages: ["declare_subscriber", "query", "declare_liveliness_subscriber", "liveliness_query"],
-        flows: ["ingress"], permission: "allow", key_exprs: ["conesight/**"] },
+        flows: ["ingress"], permission: "allow", key_exprs: ["conesight/**", $services_key] },
       // What a node sends to each peer (egress, keyed by the receiver's CN): samples only on the
       // keys the receiver may read; its own subscriptions and queries to any known node.
       { id: "to_camera", messages: ["put"], flows: ["egress"], permission: "allow",
@@ -67,9 +70,13 @@ acl() {
       { id: "to_localiser", messages: ["put"], flows: ["egress"], permission: "allow",
         key_exprs: [$(key keypoints), $(key camera_info)] },
       { id: "to_observer", messages: ["put", "reply"], flows: ["egress"], permission: "allow",
-        key_exprs: ["conesight/**"] },
+        key_exprs: ["conesight/**", $services_key] },
       { id: "own_interest", messages: ["declare_subscriber", "query", "declare_liveliness_subscriber", "liveliness_query"],
-        flows: ["egress"], permission: "allow", key_exprs: ["conesight/**"] },
+        flows: ["egress"], permission: "allow", key_exprs: ["conesight/**", $services_key] },
+      // Every node's presence: its liveliness token and the queryables of its latest outputs
+      // and health/manifest/schema (answers go to observers only: to_observer).
+      { id: "announce", messages: ["declare_queryable", "liveliness_token"],
+        flows: ["egress", "ingress"], permission: "allow", key_exprs: ["conesight/**", $services_key] },
     ],
     subjects: [
       { id: "camera", cert_common_names: ["camera"] },
@@ -85,7 +92,7 @@ acl() {
       { id: "keypoints", subjects: ["keypoints"], rules: ["keypoints_puts", "keypoints_reads", "to_keypoints"] },
       { id: "localiser", subjects: ["localiser"], rules: ["localiser_puts", "localiser_reads", "to_localiser"] },
       { id: "observer", subjects: ["observer"], rules: ["observer_reads", "to_observer"] },
-      { id: "member", subjects: ["member"], rules: ["own_interest"] },
+      { id: "member", subjects: ["member"], rules: ["own_interest", "announce"] },
     ],
   },
 EOF

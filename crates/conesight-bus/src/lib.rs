@@ -48,7 +48,7 @@ pub use qos::{
 };
 pub use security::check_enforceable;
 pub use session::{loopback_pair, open_session, shm_pool_bytes, zenoh_config};
-pub use topics::{Stream, Topics};
+pub use topics::{ServiceQuery, Stream, Topics};
 
 /// The Zenoh crate, re-exported so services use the same version.
 pub use zenoh;

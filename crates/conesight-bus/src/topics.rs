@@ -7,6 +7,14 @@
 //! `namespace` is per run (`live` on the car, a fresh name for every replay) so replays never
 //! mix with live data; `stream` is one of [`Stream`]'s names (`frame`, `camera_info`,
 //! `detections`, `keypoints`, `cones`).
+//!
+//! Every service also announces itself under the verbatim chunk `@service` (which no `*` or
+//! `**` matches, so stream subscribers and recorders never see it):
+//!
+//! ```text
+//! conesight/<namespace>/<vehicle>/@service/<service>/<zid>            liveliness token
+//! conesight/<namespace>/<vehicle>/@service/<service>/<zid>/<query>    health | manifest | schema
+//! ```
 
 use zenoh::key_expr::KeyExpr;
 
@@ -57,6 +65,31 @@ impl Stream {
     /// True for the heavy stream (images): congestion Drop and newest-wins subscribers.
     pub fn is_frame(self) -> bool {
         matches!(self, Self::Frame)
+    }
+}
+
+/// Chunk under which services announce themselves (verbatim: wildcards never match it).
+pub const SERVICE_CHUNK: &str = "@service";
+
+/// What a service answers besides its streams' latest messages.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum ServiceQuery {
+    /// Readiness and counters, JSON.
+    Health,
+    /// Version, git revision, model sha256s, streams in and out, JSON.
+    Manifest,
+    /// The protobuf `FileDescriptorSet` of every bus message.
+    Schema,
+}
+
+impl ServiceQuery {
+    /// The last key chunk.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Health => "health",
+            Self::Manifest => "manifest",
+            Self::Schema => "schema",
+        }
     }
 }
 
@@ -144,6 +177,60 @@ impl Topics {
         key_expr(format!("{ROOT}/{}/**", self.namespace))
     }
 
+    /// `conesight/<namespace>/<vehicle>/@service/<service>/<zid>`: a service's liveliness token.
+    pub fn service_token(&self, service: &str, zid: &str) -> Result<KeyExpr<'static>, BusError> {
+        checked_chunk("service", service)?;
+        checked_chunk("zid", zid)?;
+        key_expr(format!(
+            "{ROOT}/{}/{}/{SERVICE_CHUNK}/{service}/{zid}",
+            self.namespace, self.vehicle
+        ))
+    }
+
+    /// `conesight/<namespace>/<vehicle>/@service/<service>/<zid>/<query>`.
+    pub fn service_query(
+        &self,
+        service: &str,
+        zid: &str,
+        query: ServiceQuery,
+    ) -> Result<KeyExpr<'static>, BusError> {
+        let token = self.service_token(service, zid)?;
+        key_expr(format!("{token}/{}", query.as_str()))
+    }
+
+    /// `conesight/<namespace>/<vehicle>/@service/*/*`: every service token of this vehicle.
+    pub fn all_services(&self) -> Result<KeyExpr<'static>, BusError> {
+        key_expr(format!(
+            "{ROOT}/{}/{}/{SERVICE_CHUNK}/*/*",
+            self.namespace, self.vehicle
+        ))
+    }
+
+    /// `<query>` of every service of this vehicle.
+    pub fn all_services_query(&self, query: ServiceQuery) -> Result<KeyExpr<'static>, BusError> {
+        key_expr(format!(
+            "{ROOT}/{}/{}/{SERVICE_CHUNK}/*/*/{}",
+            self.namespace,
+            self.vehicle,
+            query.as_str()
+        ))
+    }
+
+    /// The service name and session id of a service token key of this run and vehicle.
+    pub fn parse_service<'k>(&self, key: &'k str) -> Option<(&'k str, &'k str)> {
+        let rest = key
+            .strip_prefix(ROOT)?
+            .strip_prefix('/')?
+            .strip_prefix(self.namespace.as_str())?
+            .strip_prefix('/')?
+            .strip_prefix(self.vehicle.as_str())?
+            .strip_prefix('/')?
+            .strip_prefix(SERVICE_CHUNK)?
+            .strip_prefix('/')?;
+        let (service, zid) = rest.split_once('/')?;
+        (is_valid_chunk(service) && is_valid_chunk(zid)).then_some((service, zid))
+    }
+
     /// The camera and stream of a key of this run and vehicle; `None` for any other key.
     pub fn parse<'k>(&self, key: &'k str) -> Option<(&'k str, Stream)> {
         let rest = key
@@ -215,6 +302,36 @@ mod tests {
         assert_eq!(topics.parse("conesight/other/car/front/frame"), None);
         assert_eq!(topics.parse("conesight/live/car/front/unknown"), None);
         assert_eq!(topics.parse("conesight/live/car/a/b/frame"), None);
+    }
+
+    #[test]
+    fn service_keys_are_apart_from_streams() {
+        let topics = Topics::new("live", "car").unwrap();
+        let token = topics.service_token("detector", "a1b2").unwrap();
+        assert_eq!(token.as_str(), "conesight/live/car/@service/detector/a1b2");
+        let health = topics
+            .service_query("detector", "a1b2", ServiceQuery::Health)
+            .unwrap();
+        assert_eq!(
+            health.as_str(),
+            "conesight/live/car/@service/detector/a1b2/health"
+        );
+        assert!(topics.all_services().unwrap().intersects(&token));
+        assert!(
+            topics
+                .all_services_query(ServiceQuery::Health)
+                .unwrap()
+                .intersects(&health)
+        );
+        // Neither a recorder's `**` nor a stream's `*` reaches the verbatim chunk.
+        assert!(!topics.whole_run().unwrap().intersects(&token));
+        assert!(!topics.whole_run().unwrap().intersects(&health));
+        assert_eq!(
+            topics.parse_service(token.as_str()),
+            Some(("detector", "a1b2"))
+        );
+        assert_eq!(topics.parse_service(health.as_str()), None);
+        assert!(topics.service_token("a/b", "x").is_err());
     }
 
     #[test]

@@ -10,6 +10,8 @@
 //! - `record`: the bus of a run into MCAP files ([`record_cmd`]).
 //! - `replay`: recorded frames and camera info back onto the bus ([`replay_cmd`]).
 //! - `diff`: the cones of two recordings compared by range band ([`diff_cmd`]).
+//! - `status`: the live services of a namespace with their health ([`status_cmd`]).
+//! - `echo`: a stream's messages as JSON lines ([`echo_cmd`]).
 //! - `eval`: the paper's experiments on the held-out synthetic set ([`conesight_eval::cli`]);
 //!   `make eval` runs the same through the `conesight-eval` binary and writes the report.
 
@@ -17,11 +19,13 @@ mod bev;
 mod demo;
 mod demo_frame;
 mod diff_cmd;
+mod echo_cmd;
 mod keypoints_cmd;
 mod predict;
 mod record_cmd;
 mod replay_cmd;
 mod run;
+mod status_cmd;
 
 use clap::{Parser, Subcommand};
 
@@ -60,10 +64,15 @@ enum Command {
     Replay(replay_cmd::ReplayArgs),
     /// Compare the cones of two recordings of the same drive, per range band; PNG plots.
     Diff(diff_cmd::DiffArgs),
+    /// The live services of a namespace (liveliness tokens) with their health; `--watch`
+    /// prints joins and leaves.
+    Status(status_cmd::StatusArgs),
+    /// A stream's messages as JSON lines (the latest first, then as they come).
+    Echo(echo_cmd::EchoArgs),
 }
 
 /// The git revision the binary was built from (`build.rs`; `unknown` outside a checkout).
-pub(crate) const GIT_REVISION: &str = env!("CONESIGHT_GIT_REVISION");
+pub(crate) const GIT_REVISION: &str = conesight_pipeline::presence::GIT_REVISION;
 
 fn main() -> anyhow::Result<std::process::ExitCode> {
     let cli = Cli::parse();
@@ -78,6 +87,9 @@ fn main() -> anyhow::Result<std::process::ExitCode> {
         Command::Replay(args) => replay_cmd::run(args)?,
         // Exit status 1 when `--fail-above` is exceeded.
         Command::Diff(args) => return diff_cmd::run(&args),
+        // Exit status 1 when no service is live.
+        Command::Status(args) => return status_cmd::run(&args),
+        Command::Echo(args) => echo_cmd::run(&args)?,
     }
     Ok(std::process::ExitCode::SUCCESS)
 }

@@ -161,19 +161,10 @@ pub(crate) fn display_paths(paths: &[std::path::PathBuf]) -> Vec<String> {
     paths.iter().map(|p| p.display().to_string()).collect()
 }
 
-/// The sha256 of a file, lowercase hex (as `sha256sum` prints it), read in blocks.
+/// The sha256 of a model file, lowercase hex (as `sha256sum` prints it).
 pub(crate) fn sha256_hex(path: &Path) -> anyhow::Result<String> {
-    use sha2::Digest;
-    let mut file = std::fs::File::open(path)
-        .with_context(|| format!("cannot read the model {} (--models)", path.display()))?;
-    let mut hasher = sha2::Sha256::new();
-    std::io::copy(&mut file, &mut hasher)
-        .with_context(|| format!("cannot read the model {} (--models)", path.display()))?;
-    Ok(hasher
-        .finalize()
-        .iter()
-        .map(|b| format!("{b:02x}"))
-        .collect())
+    conesight_pipeline::presence::sha256_hex(path)
+        .with_context(|| format!("cannot read the model {} (--models)", path.display()))
 }
 
 #[cfg(test)]

@@ -238,7 +238,7 @@ async fn run_async(args: RunArgs) -> anyhow::Result<()> {
     // Subscribe before any service publishes, so the monitor sees frame 0.
     let monitor = Monitor::subscribe(&session, &topics, &args.camera).await?;
     let start_node = |name: ServiceName, label: &'static str, age| {
-        let node = Node::new(label, session.clone(), topics.clone(), age);
+        let node = Node::new(label, &args.camera, session.clone(), topics.clone(), age);
         (name, node)
     };
     let mut nodes = Vec::new();
@@ -257,8 +257,11 @@ async fn run_async(args: RunArgs) -> anyhow::Result<()> {
         }
     }
     let mut readiness = Vec::new();
+    // Liveliness tokens and health/manifest/schema queryables, withdrawn when the run ends.
+    let mut presences = Vec::new();
     for (name, node) in nodes {
         readiness.push(node.readiness.clone());
+        presences.push(node.announce().await?);
         if args.http_base_port.is_some() {
             let addr = node.serve_http(common(name).http.addr, &shutdown).await?;
             println!("{name:?}: http://{addr}/metrics");
@@ -298,6 +301,7 @@ async fn run_async(args: RunArgs) -> anyhow::Result<()> {
         let source = load_source(&camera_args, true).await?;
         preloaded = source.known_frames();
         let (name, node) = start_node(ServiceName::Camera, "camera", None);
+        presences.push(node.announce().await?);
         if args.http_base_port.is_some() {
             let addr = node
                 .serve_http(camera_args.common.http.addr, &shutdown)
@@ -335,6 +339,7 @@ async fn run_async(args: RunArgs) -> anyhow::Result<()> {
             Err(error) => eprintln!("{name:?} service task failed: {error}"),
         }
     }
+    drop(presences);
     if let Err(error) = session.close().await {
         tracing::warn!(%error, "closing the Zenoh session");
     }

@@ -135,15 +135,10 @@ pub fn http_get(port: u16, path: &str) -> Option<String> {
         .map(|(_, body)| body.to_owned())
 }
 
-/// The value of the metric line `name` (no labels) in a Prometheus text body.
+/// The value of the series `name` (labels it names must be there; others, such as `service`
+/// and `camera`, may be too) in a Prometheus text body.
 pub fn metric(body: &str, name: &str) -> Option<f64> {
-    body.lines().find_map(|line| {
-        line.strip_prefix(name)?
-            .strip_prefix(' ')?
-            .trim()
-            .parse()
-            .ok()
-    })
+    conesight_service::metrics::series_value(body, name)
 }
 
 /// Resident memory of process `pid`, bytes (VmRSS of /proc/PID/status).

@@ -22,6 +22,8 @@
 //! - [`gate`]: [`gate::InputGate`], the checks every input's header passes (camera, stamps,
 //!   sequence gaps).
 //! - [`node`]: what a service on the bus shares (session, metrics, readiness, shutdown).
+//! - [`presence`]: what a service tells the bus about itself: liveliness token, `health`,
+//!   `manifest` and `schema` queryables, outputs that answer a `get` with their latest message.
 //! - `error`: [`PipelineError`], the error enum.
 //!
 //! Entry point in-process: `InProcessPipeline::load(&PipelineConfig::default())?.process(..)`.
@@ -35,6 +37,7 @@ pub mod keypoint_stage;
 pub mod localiser_stage;
 pub mod models;
 pub mod node;
+pub mod presence;
 pub mod source;
 pub mod stats;
 pub mod truth;
@@ -46,5 +49,6 @@ pub use keypoint_stage::{KeypointOutput, KeypointStage};
 pub use localiser_stage::{LocaliserOutput, LocaliserStage};
 pub use models::{DEFAULT_DETECTOR_FILE, detector_is_trained, locate_detector};
 pub use node::{Node, Shutdown};
+pub use presence::{Manifest, Output, Presence};
 pub use source::{SourceFrame, SyntheticParams, SyntheticSource};
 pub use truth::{ConeMatch, FrameTruth, TrueCone, match_cones};

@@ -165,17 +165,26 @@ pub struct Node {
     pub readiness: Arc<Readiness>,
     /// Errors counted by kind and logged rate-limited.
     pub errors: Arc<ErrorReporter>,
+    /// Models and streams, for the manifest (`crate::presence`).
+    pub(crate) identity: Arc<std::sync::Mutex<crate::presence::Identity>>,
 }
 
 impl Node {
-    /// A node on `session`; `max_input_age` is `None` for sources. The session counts as up.
+    /// A node of service `name` for `camera` on `session` (its metrics labelled with both);
+    /// `max_input_age` is `None` for sources. The session counts as up.
     pub fn new(
         name: &'static str,
+        camera: &str,
         session: Session,
         topics: Topics,
         max_input_age: Option<Duration>,
     ) -> Self {
-        let metrics = Arc::new(Metrics::new());
+        let metrics = Arc::new(Metrics::for_service(name, camera));
+        metrics.set_build_info(&conesight_service::BuildInfo {
+            version: crate::presence::VERSION.to_owned(),
+            git_revision: crate::presence::GIT_REVISION.to_owned(),
+            ..Default::default()
+        });
         let readiness = Arc::new(Readiness::new(max_input_age));
         readiness.set_session_up(true);
         Self {
@@ -188,6 +197,7 @@ impl Node {
             )),
             metrics,
             readiness,
+            identity: Arc::default(),
         }
     }
 
@@ -238,6 +248,7 @@ impl Node {
     ) -> Result<Subscriber<()>, conesight_bus::BusError> {
         let submitter = worker.submitter();
         let node = self.clone();
+        self.add_input(&key);
         declare_callback_subscriber(&self.session, key, move |sample| {
             if let Ok(header) = peek_header(conesight_bus::payload_buf(sample.payload()))
                 && !gate.admit(&node, stream, &header)
@@ -291,11 +302,13 @@ where
         .await
         .context("opening the Zenoh session")?;
     let topics = Topics::from_args(&args.zenoh)?;
-    let node = Node::new(name, session.clone(), topics, max_input_age);
+    let node = Node::new(name, &args.camera, session.clone(), topics, max_input_age);
     node.serve_http(args.http.addr, &shutdown).await?;
+    let presence = node.announce().await?;
     tracing::info!(service = name, camera = %args.camera, "started");
     let result = run(node, shutdown.clone()).await;
     shutdown.trigger();
+    drop(presence);
     if let Err(error) = session.close().await {
         tracing::warn!(%error, "closing the Zenoh session");
     }
@@ -411,12 +424,11 @@ pub async fn follow_camera_info(
     cell: Arc<CalibrationCell>,
     shutdown: &Shutdown,
 ) -> anyhow::Result<()> {
-    let subscriber = conesight_bus::declare_subscriber(
-        &node.session,
-        node.topics.key(camera, conesight_bus::Stream::CameraInfo)?,
-        conesight_bus::Stream::CameraInfo,
-    )
-    .await?;
+    let key = node.topics.key(camera, conesight_bus::Stream::CameraInfo)?;
+    node.add_input(&key);
+    let subscriber =
+        conesight_bus::declare_subscriber(&node.session, key, conesight_bus::Stream::CameraInfo)
+            .await?;
     let node = node.clone();
     let shutdown = shutdown.clone();
     let camera_id = camera.to_owned();

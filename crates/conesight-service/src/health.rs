@@ -119,6 +119,17 @@ impl Readiness {
             .store(since_start.saturating_add(1), Ordering::Relaxed);
     }
 
+    /// Time since the latest input, or since start before the first.
+    pub fn input_age_or_uptime(&self) -> Duration {
+        let last = self.last_input_ns.load(Ordering::Relaxed);
+        let elapsed = self.started.elapsed();
+        if last == 0 {
+            elapsed
+        } else {
+            elapsed.saturating_sub(Duration::from_nanos(last - 1))
+        }
+    }
+
     /// The current state.
     pub fn report(&self) -> ReadinessReport {
         let last = self.last_input_ns.load(Ordering::Relaxed);

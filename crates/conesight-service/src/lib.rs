@@ -35,7 +35,7 @@ pub use http::{
     HEADER_READ_TIMEOUT, HttpArgs, HttpLimits, HttpState, MAX_CONNECTIONS, router, serve,
     serve_with,
 };
-pub use metrics::Metrics;
+pub use metrics::{BuildInfo, Metrics};
 pub use shutdown::shutdown_signal;
 pub use telemetry::{init_tracing, init_tracing_to_file};
 pub use worker::{Submitter, Worker};

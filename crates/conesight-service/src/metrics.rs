@@ -14,7 +14,14 @@
 //! | `conesight_queue_depth` | gauge | |
 //! | `conesight_detections_masked_total` | counter | (detector) detections dropped in the ego mask |
 //! | `conesight_detector_coverage_ratio` | gauge | (detector) share of the frame it covers |
+//! | `conesight_cones_published_total` | counter | `class` (localiser) |
+//! | `conesight_input_age_seconds` | gauge | seconds since the latest input (since start before the first) |
+//! | `conesight_build_info` | gauge (1) | `version`, `git_revision`, `model`, `model_sha256` |
+//!
+//! A service's registry ([`Metrics::for_service`]) adds the labels `service` and `camera` to
+//! every metric, so one Prometheus sees every service of every camera apart.
 
+use std::borrow::Cow;
 use std::time::Duration;
 
 use prometheus_client::encoding::text::encode;
@@ -62,6 +69,22 @@ pub struct Metrics {
     detections_masked: Counter,
     detector_coverage: Gauge<f64, AtomicU64>,
     source_restarts: Counter,
+    cones_published: Family<OneLabel, Counter>,
+    input_age: Gauge<f64, AtomicU64>,
+    build_info: Family<Vec<(&'static str, String)>, Gauge>,
+}
+
+/// What `conesight_build_info` says: the build and the model a service runs.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct BuildInfo {
+    /// Crate version (`CARGO_PKG_VERSION`).
+    pub version: String,
+    /// Git revision the binary was built from (`unknown` outside a checkout).
+    pub git_revision: String,
+    /// The model's file name, empty for services without one.
+    pub model: String,
+    /// sha256 of the model file (hex), empty without one.
+    pub model_sha256: String,
 }
 
 impl Default for Metrics {
@@ -71,9 +94,25 @@ impl Default for Metrics {
 }
 
 impl Metrics {
-    /// A registry with every metric registered at zero.
+    /// A registry with every metric registered at zero, no constant labels.
     pub fn new() -> Self {
-        let mut registry = Registry::with_prefix(METRIC_PREFIX);
+        Self::with_registry(Registry::with_prefix(METRIC_PREFIX))
+    }
+
+    /// The registry of one service: every metric carries `service="<service>"` and
+    /// `camera="<camera>"`.
+    pub fn for_service(service: &str, camera: &str) -> Self {
+        let labels = [
+            (Cow::Borrowed("service"), Cow::Owned(service.to_owned())),
+            (Cow::Borrowed("camera"), Cow::Owned(camera.to_owned())),
+        ];
+        Self::with_registry(Registry::with_prefix_and_labels(
+            METRIC_PREFIX,
+            labels.into_iter(),
+        ))
+    }
+
+    fn with_registry(mut registry: Registry) -> Self {
         let frames_received = Counter::default();
         let frames_processed = Counter::default();
         let frames_dropped = Counter::default();
@@ -88,6 +127,24 @@ impl Metrics {
         let detections_masked = Counter::default();
         let detector_coverage = Gauge::<f64, AtomicU64>::default();
         let source_restarts = Counter::default();
+        let cones_published = Family::<OneLabel, Counter>::default();
+        let input_age = Gauge::<f64, AtomicU64>::default();
+        let build_info = Family::<Vec<(&'static str, String)>, Gauge>::default();
+        registry.register(
+            "cones_published",
+            "Cones published, by class (localiser)",
+            cones_published.clone(),
+        );
+        registry.register(
+            "input_age_seconds",
+            "Seconds since the latest input arrived (since start before the first)",
+            input_age.clone(),
+        );
+        registry.register(
+            "build_info",
+            "Always 1: the build (version, git revision) and the model (file, sha256) of the service",
+            build_info.clone(),
+        );
         registry.register(
             "source_restarts",
             "Restarts of the frame source after it failed, ended or stalled (camera)",
@@ -158,7 +215,42 @@ impl Metrics {
             detections_masked,
             detector_coverage,
             source_restarts,
+            cones_published,
+            input_age,
+            build_info,
         }
+    }
+
+    /// Counts `count` cones of `class` published.
+    pub fn cones_published(&self, class: &'static str, count: u64) {
+        self.cones_published
+            .get_or_create(&[("class", class)])
+            .inc_by(count);
+    }
+
+    /// Cones of `class` published so far.
+    pub fn cones_published_count(&self, class: &'static str) -> u64 {
+        self.cones_published
+            .get_or_create(&[("class", class)])
+            .get()
+    }
+
+    /// Sets the age of the latest input, seconds.
+    pub fn set_input_age(&self, seconds: f64) {
+        self.input_age.set(seconds);
+    }
+
+    /// Replaces `conesight_build_info` (one series, value 1).
+    pub fn set_build_info(&self, info: &BuildInfo) {
+        self.build_info.clear();
+        self.build_info
+            .get_or_create(&vec![
+                ("version", info.version.clone()),
+                ("git_revision", info.git_revision.clone()),
+                ("model", info.model.clone()),
+                ("model_sha256", info.model_sha256.clone()),
+            ])
+            .set(1);
     }
 
     /// Counts one restart of the frame source.
@@ -189,6 +281,21 @@ impl Metrics {
     /// Counts one input processed and published.
     pub fn frame_processed(&self) {
         self.frames_processed.inc();
+    }
+
+    /// Inputs received so far.
+    pub fn frames_received_count(&self) -> u64 {
+        self.frames_received.get()
+    }
+
+    /// Inputs processed so far.
+    pub fn frames_processed_count(&self) -> u64 {
+        self.frames_processed.get()
+    }
+
+    /// Inputs dropped so far.
+    pub fn frames_dropped_count(&self) -> u64 {
+        self.frames_dropped.get()
     }
 
     /// Counts one input dropped.
@@ -249,6 +356,37 @@ impl Metrics {
     }
 }
 
+/// The value of `series` in a Prometheus text body, for tests and tools: `series` is `name` or
+/// `name{label="value",...}`; a line matches when its metric name is `name` and it carries every
+/// label given (others, such as `service` and `camera`, may be there too). The first match.
+pub fn series_value(text: &str, series: &str) -> Option<f64> {
+    let (name, wanted) = split_series(series);
+    text.lines().find_map(|line| {
+        if line.starts_with('#') {
+            return None;
+        }
+        let (head, value) = line.rsplit_once(' ')?;
+        let (line_name, labels) = split_series(head);
+        (line_name == name && wanted.iter().all(|label| labels.contains(label)))
+            .then(|| value.trim().parse().ok())
+            .flatten()
+    })
+}
+
+/// `name{a="1",b="2"}` -> (`name`, [`a="1"`, `b="2"`]); label values hold no commas here.
+fn split_series(series: &str) -> (&str, Vec<&str>) {
+    match series.split_once('{') {
+        Some((name, rest)) => (
+            name,
+            rest.trim_end_matches('}')
+                .split(',')
+                .filter(|label| !label.is_empty())
+                .collect(),
+        ),
+        None => (series, Vec::new()),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -283,5 +421,50 @@ mod tests {
         assert_eq!(metrics.error_count("malformed_protobuf"), 1);
         assert_eq!(metrics.shared_memory_message_count(), 1);
         assert!(text.ends_with("# EOF\n"));
+    }
+
+    #[test]
+    fn service_labels_build_info_and_cones_by_class() {
+        let metrics = Metrics::for_service("localiser", "front");
+        metrics.cones_published("blue", 3);
+        metrics.cones_published("yellow", 1);
+        metrics.set_input_age(0.25);
+        metrics.set_build_info(&BuildInfo {
+            version: "0.1.0".into(),
+            git_revision: "abc".into(),
+            model: String::new(),
+            model_sha256: String::new(),
+        });
+        metrics.set_build_info(&BuildInfo {
+            version: "0.1.0".into(),
+            git_revision: "abc".into(),
+            model: "keypoints.onnx".into(),
+            model_sha256: "00ff".into(),
+        });
+        let text = metrics.encode();
+        for line in [
+            "conesight_cones_published_total{service=\"localiser\",camera=\"front\",class=\"blue\"} 3",
+            "conesight_cones_published_total{service=\"localiser\",camera=\"front\",class=\"yellow\"} 1",
+            "conesight_input_age_seconds{service=\"localiser\",camera=\"front\"} 0.25",
+            "conesight_build_info{service=\"localiser\",camera=\"front\",version=\"0.1.0\",git_revision=\"abc\",model=\"keypoints.onnx\",model_sha256=\"00ff\"} 1",
+            "conesight_frames_received_total{service=\"localiser\",camera=\"front\"} 0",
+        ] {
+            assert!(text.contains(line), "missing {line:?} in\n{text}");
+        }
+        assert_eq!(
+            series_value(&text, "conesight_cones_published_total{class=\"blue\"}"),
+            Some(3.0)
+        );
+        assert_eq!(
+            series_value(&text, "conesight_frames_received_total"),
+            Some(0.0)
+        );
+        assert_eq!(
+            series_value(&text, "conesight_cones_published_total{class=\"orange\"}"),
+            None
+        );
+        // The model was set after start: one build_info series, not two.
+        assert_eq!(text.matches("conesight_build_info{").count(), 1, "{text}");
+        assert_eq!(metrics.cones_published_count("blue"), 3);
     }
 }

@@ -4,9 +4,7 @@
 
 use std::time::{Duration, Instant};
 
-use conesight_bus::{
-    PayloadStorage, Stream, declare_publisher, declare_subscriber, publish, publish_payload,
-};
+use conesight_bus::{PayloadStorage, Stream, declare_subscriber, encode};
 use conesight_pipeline::{Node, Shutdown};
 use conesight_proto::{now_ns, pb};
 use conesight_sources::{Backoff, FrameSource, Next, Pacing, SourceError, check_size};
@@ -26,12 +24,10 @@ pub async fn run(
     shutdown: Shutdown,
 ) -> anyhow::Result<()> {
     let camera_id = args.common.camera.as_str();
-    let frame_publisher =
-        declare_publisher(&node.session, &node.topics, camera_id, Stream::Frame).await?;
-    let info_publisher =
-        declare_publisher(&node.session, &node.topics, camera_id, Stream::CameraInfo).await?;
+    let frame_publisher = node.declare_output(camera_id, Stream::Frame).await?;
+    let info_publisher = node.declare_output(camera_id, Stream::CameraInfo).await?;
     let boxes_publisher = if args.publish_boxes {
-        Some(declare_publisher(&node.session, &node.topics, camera_id, Stream::Detections).await?)
+        Some(node.declare_output(camera_id, Stream::Detections).await?)
     } else {
         None
     };
@@ -133,7 +129,7 @@ pub async fn run(
             header.stamp_publish();
             let info =
                 pb::CameraInfo::new(header, &item.frame.camera, Some(&item.frame.extrinsics));
-            publish(&info_publisher, &info).await?;
+            info_publisher.publish(encode(&info)).await?;
             last_info = Some(Instant::now());
         }
         let started = Instant::now();
@@ -156,7 +152,7 @@ pub async fn run(
         }
         node.metrics.observe_stage("encode", started.elapsed());
         let put = Instant::now();
-        if let Err(error) = publish_payload(&frame_publisher, payload).await {
+        if let Err(error) = frame_publisher.publish(payload).await {
             node.errors.report("publish", &error);
         } else {
             node.metrics.frame_processed();
@@ -166,7 +162,7 @@ pub async fn run(
             let mut header = header.clone();
             header.stamp_publish();
             let detections = pb::Detections::new(header, &item.boxes);
-            if let Err(error) = publish(publisher, &detections).await {
+            if let Err(error) = publisher.publish(encode(&detections)).await {
                 node.errors.report("publish", &error);
             }
         }

@@ -102,8 +102,9 @@ async fn frames_of_another_size_are_reported_with_both_sizes_and_retried() {
         "{text}"
     );
     let metrics = camera.node.metrics.encode();
-    assert!(
-        metrics.contains("conesight_frames_processed_total 0"),
+    assert_eq!(
+        conesight_service::metrics::series_value(&metrics, "conesight_frames_processed_total"),
+        Some(0.0),
         "{metrics}"
     );
     camera.stop().await;

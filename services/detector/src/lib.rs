@@ -15,9 +15,8 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
 
-use conesight_bus::zenoh::Wait;
 use conesight_bus::zenoh::sample::Sample;
-use conesight_bus::{Stream, declare_publisher, encode};
+use conesight_bus::{Stream, encode};
 use conesight_detect::EgoMask;
 use conesight_onnx::ModelOptions;
 use conesight_pipeline::node::CommonArgs;
@@ -72,11 +71,12 @@ pub async fn run(args: &DetectorArgs, node: Node, shutdown: Shutdown) -> anyhow:
         ..ModelOptions::default()
     };
     let ego_mask = args.ego_mask.as_deref().map(EgoMask::parse).transpose()?;
+    let model_path = path.clone();
     let mut stage =
         tokio::task::spawn_blocking(move || DetectorStage::load(&path, &onnx)).await??;
+    node.add_model(&model_path);
     stage.set_ego_mask(ego_mask);
-    let publisher =
-        declare_publisher(&node.session, &node.topics, camera, Stream::Detections).await?;
+    let publisher = node.declare_output(camera, Stream::Detections).await?;
     let limit = args.common.max_message_bytes();
     let gate = Arc::new(args.common.input_gate());
     let worker_gate = gate.clone();
@@ -132,7 +132,7 @@ pub async fn run(args: &DetectorArgs, node: Node, shutdown: Shutdown) -> anyhow:
         let mut header = header;
         header.stamp_publish();
         let message = pb::Detections::new(header, &detections);
-        match publisher.put(encode(&message)).wait() {
+        match publisher.put(encode(&message)) {
             Ok(()) => node.metrics.frame_processed(),
             Err(error) => {
                 node.errors.report("publish", &error);

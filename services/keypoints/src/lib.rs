@@ -24,9 +24,8 @@ use std::path::PathBuf;
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Instant;
 
-use conesight_bus::zenoh::Wait;
 use conesight_bus::zenoh::sample::Sample;
-use conesight_bus::{Stream, declare_callback_subscriber, declare_publisher, encode};
+use conesight_bus::{Stream, declare_callback_subscriber, encode};
 use conesight_onnx::ModelOptions;
 use conesight_pipeline::gate::InputGate;
 use conesight_pipeline::keypoint_stage::DEFAULT_MAX_CONES_PER_FRAME;
@@ -92,12 +91,13 @@ pub async fn run(args: &KeypointsArgs, node: Node, shutdown: Shutdown) -> anyhow
         ..ModelOptions::default()
     };
     let max_cones = args.max_cones;
+    let model_path = path.clone();
     let mut stage = tokio::task::spawn_blocking(move || {
         KeypointStage::load(&path, &onnx).map(|stage| stage.with_max_cones(max_cones))
     })
     .await??;
-    let publisher =
-        declare_publisher(&node.session, &node.topics, camera, Stream::Keypoints).await?;
+    node.add_model(&model_path);
+    let publisher = node.declare_output(camera, Stream::Keypoints).await?;
     let limit = args.common.max_message_bytes();
     let gate = Arc::new(args.common.input_gate());
     let worker_gate = gate.clone();
@@ -162,7 +162,7 @@ pub async fn run(args: &KeypointsArgs, node: Node, shutdown: Shutdown) -> anyhow
             header.stamp_publish();
             let message =
                 pb::Keypoints::new(header, (image.width(), image.height()), &output.cones);
-            match publisher.put(encode(&message)).wait() {
+            match publisher.put(encode(&message)) {
                 Ok(()) => node.metrics.frame_processed(),
                 Err(error) => {
                     node.errors.report("publish", &error);
@@ -182,21 +182,16 @@ pub async fn run(args: &KeypointsArgs, node: Node, shutdown: Shutdown) -> anyhow
     });
     let frames = {
         let feed = feed.clone();
-        declare_callback_subscriber(
-            &node.session,
-            node.topics.key(camera, Stream::Frame)?,
-            move |sample| feed.on_frame(sample),
-        )
-        .await?
+        let key = node.topics.key(camera, Stream::Frame)?;
+        node.add_input(&key);
+        declare_callback_subscriber(&node.session, key, move |sample| feed.on_frame(sample)).await?
     };
     let detections = {
         let feed = feed.clone();
-        declare_callback_subscriber(
-            &node.session,
-            node.topics.key(camera, Stream::Detections)?,
-            move |sample| feed.on_detections(sample),
-        )
-        .await?
+        let key = node.topics.key(camera, Stream::Detections)?;
+        node.add_input(&key);
+        declare_callback_subscriber(&node.session, key, move |sample| feed.on_detections(sample))
+            .await?
     };
     // Ready for input only now: the model is loaded and the subscribers are declared.
     node.readiness.set_model_loaded(true);

@@ -15,9 +15,8 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use conesight_bus::zenoh::Wait;
 use conesight_bus::zenoh::sample::Sample;
-use conesight_bus::{Stream, declare_publisher, encode};
+use conesight_bus::{Stream, encode};
 use conesight_core::Extrinsics;
 use conesight_pipeline::node::{CalibrationCell, CommonArgs, follow_camera_info};
 use conesight_pipeline::{LocaliserStage, Node, Shutdown};
@@ -61,7 +60,7 @@ pub async fn run(args: &LocaliserArgs, node: Node, shutdown: Shutdown) -> anyhow
     };
     let calibration = Arc::new(CalibrationCell::default());
     follow_camera_info(&node, camera, calibration.clone(), &shutdown).await?;
-    let publisher = declare_publisher(&node.session, &node.topics, camera, Stream::Cones).await?;
+    let publisher = node.declare_output(camera, Stream::Cones).await?;
     let limit = args.common.max_message_bytes().min(KEYPOINTS_LIMIT_BYTES);
     let ground_plane = args.ground_plane;
     let gate = Arc::new(args.common.input_gate());
@@ -146,8 +145,14 @@ pub async fn run(args: &LocaliserArgs, node: Node, shutdown: Shutdown) -> anyhow
         let message = pb::Cones::new_stamped(header, &located);
         node.metrics
             .observe_stage("end_to_end", Duration::from_nanos(message.latency_ns));
-        match publisher.put(encode(&message)).wait() {
-            Ok(()) => node.metrics.frame_processed(),
+        match publisher.put(encode(&message)) {
+            Ok(()) => {
+                node.metrics.frame_processed();
+                for cone in &located {
+                    node.metrics
+                        .cones_published(cone.detection.class.as_str(), 1);
+                }
+            }
             Err(error) => {
                 node.errors.report("publish", &error);
             }

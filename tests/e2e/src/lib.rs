@@ -334,12 +334,7 @@ impl Cluster {
     pub fn metric(&self, name: &str, series: &str) -> f64 {
         self.http(name, "/metrics")
             .ok()
-            .and_then(|(_, body)| {
-                body.lines()
-                    .find(|l| l.starts_with(series) && l[series.len()..].starts_with(' '))
-                    .and_then(|l| l.rsplit(' ').next())
-                    .and_then(|v| v.parse().ok())
-            })
+            .and_then(|(_, body)| conesight_service::metrics::series_value(&body, series))
             .unwrap_or(0.0)
     }
 

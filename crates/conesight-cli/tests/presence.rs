@@ -1,0 +1,425 @@
+//! Dashboards' view of a running pipeline: the four services as four `conesight run --services
+//! X` processes on loopback Zenoh, each announcing itself. A Zenoh `get` on each service's
+//! manifest, health and schema keys and on every stream key (latest message) answers; a late
+//! joiner has cones from one query; `conesight status` lists the 4 services and, after a
+//! `kill -9` of one, `conesight status --watch` sees it leave within 2 s; `conesight echo`
+//! prints cones as JSON; the metrics carry `service`/`camera` labels, `conesight_build_info`
+//! with the model's sha256, cones by class and the input age.
+#![allow(clippy::unwrap_used, clippy::expect_used, missing_docs)]
+
+mod common_process;
+
+use std::collections::BTreeSet;
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+use common_process::{BIN, Process, TempDir, free_port, http_get, metric};
+use conesight_bus::{ServiceQuery, Stream, Topics, ZenohArgs, open_session};
+use conesight_proto::{Message, pb};
+use serde_json::Value;
+
+const SERVICES: [&str; 4] = ["camera", "detector", "keypoints", "localiser"];
+
+struct Pipeline {
+    namespace: String,
+    endpoints: Vec<String>,
+    http_base: u16,
+    processes: Vec<Option<Process>>,
+}
+
+impl Pipeline {
+    /// The four services, each its own process listening on its own port and connecting to
+    /// the others (and to `observer`).
+    fn start(dir: &TempDir) -> Self {
+        let namespace = format!("presence{}", std::process::id());
+        let endpoints: Vec<String> = (0..5)
+            .map(|_| format!("tcp/127.0.0.1:{}", free_port()))
+            .collect();
+        let http_base = free_port().saturating_sub(10).max(20_000);
+        let base = http_base.to_string();
+        let mut processes = Vec::new();
+        for (index, service) in SERVICES.iter().enumerate() {
+            let others: Vec<&str> = endpoints
+                .iter()
+                .enumerate()
+                .filter(|(i, _)| *i != index)
+                .map(|(_, e)| e.as_str())
+                .collect();
+            let others = others.join(",");
+            let out = dir.join(service);
+            let mut args = vec![
+                "run",
+                "--services",
+                service,
+                "--namespace",
+                &namespace,
+                "--zenoh-listen",
+                &endpoints[index],
+                "--zenoh-connect",
+                &others,
+                "--frames",
+                "0",
+                "--http-base-port",
+                &base,
+                "--out",
+                out.to_str().unwrap(),
+            ];
+            if *service == "camera" {
+                args.extend(["--rate-hz", "5", "--preload", "5"]);
+            }
+            processes.push(Some(Process::start(
+                service,
+                &args,
+                &dir.join(&format!("{service}.log")),
+            )));
+        }
+        Self {
+            namespace,
+            endpoints,
+            http_base,
+            processes,
+        }
+    }
+
+    /// The HTTP port of `service` (`--http-base-port` + its index).
+    fn http_port(&self, service: &str) -> u16 {
+        let index = SERVICES.iter().position(|s| *s == service).unwrap();
+        self.http_base + u16::try_from(index).unwrap()
+    }
+
+    /// Zenoh args of a consumer joining the pipeline (the fifth endpoint is its own).
+    fn consumer_args(&self, listen: bool) -> ZenohArgs {
+        ZenohArgs {
+            connect: self.endpoints[..4].to_vec(),
+            listen: if listen {
+                vec![self.endpoints[4].clone()]
+            } else {
+                Vec::new()
+            },
+            namespace: self.namespace.clone(),
+            ..ZenohArgs::default()
+        }
+    }
+
+    /// `--namespace` and `--zenoh-connect` of a `conesight` consumer command.
+    fn cli_args(&self) -> Vec<String> {
+        vec![
+            "--namespace".into(),
+            self.namespace.clone(),
+            "--zenoh-connect".into(),
+            self.endpoints[..4].join(","),
+        ]
+    }
+
+    fn log(&self) -> String {
+        self.processes
+            .iter()
+            .flatten()
+            .map(|p| format!("=== {} ===\n{}", p.name, p.log_text()))
+            .collect::<Vec<_>>()
+            .join("\n")
+    }
+}
+
+fn status_json(pipeline: &Pipeline) -> Vec<Value> {
+    let output = Command::new(BIN)
+        .arg("status")
+        .args(pipeline.cli_args())
+        .arg("--json")
+        .output()
+        .unwrap();
+    String::from_utf8_lossy(&output.stdout)
+        .lines()
+        .map(|line| serde_json::from_str(line).unwrap())
+        .collect()
+}
+
+fn names(status: &[Value]) -> BTreeSet<String> {
+    status
+        .iter()
+        .map(|s| s["service"].as_str().unwrap().to_owned())
+        .collect()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn services_answer_queries_and_status_follows_them() {
+    let dir = TempDir::new("presence");
+    let mut pipeline = Pipeline::start(&dir);
+
+    // Every service holds a token, answers health, and cones flow (the localiser has
+    // processed frames).
+    let started = Instant::now();
+    loop {
+        let status = status_json(&pipeline);
+        let ready = status
+            .iter()
+            .filter(|s| s["health"]["ready"] == Value::Bool(true))
+            .count();
+        let processed = http_get(pipeline.http_port("localiser"), "/metrics")
+            .and_then(|body| metric(&body, "conesight_frames_processed_total"))
+            .unwrap_or(0.0);
+        if names(&status).len() == 4 && ready == 4 && processed >= 3.0 {
+            eprintln!(
+                "4 services live and ready, cones flowing after {:.1} s",
+                started.elapsed().as_secs_f64()
+            );
+            break;
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(180),
+            "the pipeline never came up: status {status:?}\n{}",
+            pipeline.log()
+        );
+        std::thread::sleep(Duration::from_millis(500));
+    }
+    let table = Command::new(BIN)
+        .arg("status")
+        .args(pipeline.cli_args())
+        .output()
+        .unwrap();
+    let table = String::from_utf8_lossy(&table.stdout).into_owned();
+    eprintln!("{table}");
+    assert!(table.starts_with("service"), "{table}");
+    let ready_rows = table
+        .lines()
+        .skip(1)
+        .filter(|row| row.split_whitespace().nth(2) == Some("ready"))
+        .count();
+    assert_eq!(ready_rows, 4, "{table}");
+
+    let session = open_session(&pipeline.consumer_args(true)).await.unwrap();
+    let topics = Topics::new(&pipeline.namespace, "car").unwrap();
+    let get = |key: String| {
+        let session = session.clone();
+        async move {
+            let replies = session
+                .get(key.as_str())
+                .timeout(Duration::from_secs(3))
+                .await
+                .unwrap();
+            let mut samples = Vec::new();
+            while let Ok(reply) = replies.recv_async().await {
+                if let Ok(sample) = reply.result() {
+                    samples.push((
+                        sample.key_expr().to_string(),
+                        sample.payload().to_bytes().into_owned(),
+                    ));
+                }
+            }
+            samples
+        }
+    };
+    let services_key = topics.all_services().unwrap().to_string();
+    let service_key = |service: &str, query: ServiceQuery| {
+        format!(
+            "{}/{}",
+            services_key.replace("/*/*", &format!("/{service}/*")),
+            query.as_str()
+        )
+    };
+
+    // Manifests: version, revision, streams, and the models' sha256 as sha256sum prints it.
+    for service in SERVICES {
+        let replies = get(service_key(service, ServiceQuery::Manifest)).await;
+        assert_eq!(replies.len(), 1, "{service}: {replies:?}");
+        let manifest: Value = serde_json::from_slice(&replies[0].1).unwrap();
+        eprintln!("{service} manifest: {manifest}");
+        assert_eq!(manifest["service"], service);
+        assert_eq!(manifest["version"], env!("CARGO_PKG_VERSION"));
+        assert!(!manifest["git_revision"].as_str().unwrap().is_empty());
+        let outputs: Vec<&str> = manifest["outputs"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|o| o.as_str().unwrap())
+            .collect();
+        let inputs = manifest["inputs"].as_array().unwrap().len();
+        let (expected_outputs, expected_inputs, model): (&[Stream], usize, Option<&str>) =
+            match service {
+                "camera" => (&[Stream::Frame, Stream::CameraInfo], 0, None),
+                "detector" => (&[Stream::Detections], 1, Some("models/detector.onnx")),
+                "keypoints" => (&[Stream::Keypoints], 2, Some("models/keypoints.onnx")),
+                _ => (&[Stream::Cones], 2, None),
+            };
+        for stream in expected_outputs {
+            let key = topics.key("front", *stream).unwrap().to_string();
+            assert!(outputs.contains(&key.as_str()), "{service}: {outputs:?}");
+        }
+        assert!(inputs >= expected_inputs, "{service}: {manifest}");
+        let models = manifest["models"].as_array().unwrap();
+        match model {
+            Some(model) => {
+                let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+                    .join("../..")
+                    .join(model);
+                let sha = Command::new("sha256sum").arg(&path).output().unwrap();
+                let sha = String::from_utf8_lossy(&sha.stdout);
+                let sha = sha.split_whitespace().next().unwrap();
+                assert_eq!(models.len(), 1, "{manifest}");
+                assert_eq!(models[0]["sha256"], sha, "{manifest}");
+                // The same identity on /metrics.
+                let body = http_get(pipeline.http_port(service), "/metrics").unwrap();
+                assert_eq!(
+                    metric(
+                        &body,
+                        &format!(
+                            "conesight_build_info{{model_sha256=\"{sha}\",service=\"{service}\",camera=\"front\"}}"
+                        )
+                    ),
+                    Some(1.0),
+                    "{body}"
+                );
+            }
+            None => assert!(models.is_empty(), "{manifest}"),
+        }
+        let health = get(service_key(service, ServiceQuery::Health)).await;
+        assert_eq!(health.len(), 1, "{service}");
+        let health: Value = serde_json::from_slice(&health[0].1).unwrap();
+        assert_eq!(health["ready"], true, "{health}");
+        let schema = get(service_key(service, ServiceQuery::Schema)).await;
+        assert_eq!(schema.len(), 1, "{service}");
+        assert_eq!(schema[0].1, conesight_proto::FILE_DESCRIPTOR_SET);
+    }
+
+    // Every stream's latest message, from a `get` on the stream's own key.
+    for stream in Stream::ALL {
+        let key = topics.key("front", stream).unwrap().to_string();
+        let replies = get(key.clone()).await;
+        assert_eq!(replies.len(), 1, "{key}: {} replies", replies.len());
+        let header = conesight_proto::peek_header(&replies[0].1[..]).unwrap();
+        assert_eq!(header.camera_id, "front", "{key}");
+        if stream == Stream::Cones {
+            let cones = pb::Cones::decode(&replies[0].1[..]).unwrap();
+            assert!(
+                !cones.cones.is_empty(),
+                "{key}: no cones in the latest message"
+            );
+        }
+    }
+
+    // A late joiner: a fresh session has the latest cones from its first query.
+    let late = open_session(&pipeline.consumer_args(false)).await.unwrap();
+    let asked = Instant::now();
+    let replies = late
+        .get(topics.key("front", Stream::Cones).unwrap())
+        .timeout(Duration::from_secs(3))
+        .await
+        .unwrap();
+    let first = replies.recv_async().await.unwrap();
+    let waited = asked.elapsed();
+    let cones = pb::Cones::decode(&first.result().unwrap().payload().to_bytes()[..]).unwrap();
+    eprintln!(
+        "late joiner: {} cones {:.1} ms after its query (the camera publishes every 200 ms)",
+        cones.cones.len(),
+        waited.as_secs_f64() * 1e3
+    );
+    assert!(!cones.cones.is_empty());
+    assert!(waited < Duration::from_secs(2), "{waited:?}");
+    let _ = late.close().await;
+
+    // `conesight echo`: JSON lines with the proto's field names.
+    let echo = Command::new(BIN)
+        .args(["echo", "cones", "-n", "3"])
+        .args(pipeline.cli_args())
+        .output()
+        .unwrap();
+    let lines: Vec<Value> = String::from_utf8_lossy(&echo.stdout)
+        .lines()
+        .map(|line| serde_json::from_str(line).unwrap())
+        .collect();
+    assert_eq!(lines.len(), 3, "{}", String::from_utf8_lossy(&echo.stderr));
+    let cone = &lines[0]["message"]["cones"][0];
+    assert!(cone["detection"]["class"].is_string(), "{cone}");
+    assert!(cone["range_m"].as_f64().unwrap() > 0.0, "{cone}");
+    let echo_frame = Command::new(BIN)
+        .args(["echo", "frame", "-n", "1"])
+        .args(pipeline.cli_args())
+        .output()
+        .unwrap();
+    let frame: Value =
+        serde_json::from_str(String::from_utf8_lossy(&echo_frame.stdout).trim()).unwrap();
+    assert_eq!(frame["data_bytes"], 1920 * 1200 * 3, "{frame}");
+    assert_eq!(frame["message"]["width_px"], 1920);
+
+    // Metrics people can graph.
+    let body = http_get(pipeline.http_port("localiser"), "/metrics").unwrap();
+    let cones_by_class: f64 = ["blue", "yellow", "orange", "large_orange"]
+        .iter()
+        .filter_map(|class| {
+            metric(
+                &body,
+                &format!("conesight_cones_published_total{{class=\"{class}\",service=\"localiser\",camera=\"front\"}}"),
+            )
+        })
+        .sum();
+    assert!(cones_by_class > 0.0, "{body}");
+    let age = metric(&body, "conesight_input_age_seconds{service=\"localiser\"}").unwrap();
+    assert!((0.0..2.0).contains(&age), "input age {age}");
+
+    // Kill one service: `status --watch` sees it leave within 2 s, `status` lists 3.
+    let watch_log = dir.join("watch.log");
+    let watch = Process::start(
+        "watch",
+        &[
+            &["status", "--watch", "--json"][..],
+            &pipeline
+                .cli_args()
+                .iter()
+                .map(String::as_str)
+                .collect::<Vec<_>>()[..],
+        ]
+        .concat(),
+        &watch_log,
+    );
+    let events = || -> Vec<Value> {
+        watch
+            .stdout()
+            .lines()
+            .filter_map(|line| serde_json::from_str(line).ok())
+            .collect()
+    };
+    let started = Instant::now();
+    while events().iter().filter(|e| e["event"] == "join").count() < 4 {
+        assert!(
+            started.elapsed() < Duration::from_secs(30),
+            "watch saw {:?}",
+            events()
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let victim = pipeline.processes[2].as_mut().unwrap();
+    assert_eq!(victim.name, "keypoints");
+    let killed = Instant::now();
+    victim.child.kill().unwrap();
+    victim.child.wait().unwrap();
+    let left = loop {
+        if events()
+            .iter()
+            .any(|e| e["event"] == "leave" && e["service"] == "keypoints")
+        {
+            break killed.elapsed();
+        }
+        assert!(
+            killed.elapsed() < Duration::from_secs(10),
+            "keypoints never left: {:?}",
+            events()
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    };
+    eprintln!(
+        "status --watch saw keypoints leave {:.0} ms after its kill -9",
+        left.as_secs_f64() * 1e3
+    );
+    assert!(left < Duration::from_secs(2), "{left:?}");
+    drop(watch);
+    let status = status_json(&pipeline);
+    assert_eq!(
+        names(&status),
+        ["camera", "detector", "localiser"]
+            .iter()
+            .map(|s| (*s).to_owned())
+            .collect()
+    );
+    pipeline.processes[2] = None;
+    let _ = session.close().await;
+}
