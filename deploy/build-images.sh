@@ -3,7 +3,7 @@
 #
 #   deploy/build-images.sh                  # base if missing, cargo build --release, all images
 #   deploy/build-images.sh --no-cargo       # reuse target/release binaries as they are
-#   deploy/build-images.sh camera localiser # only these targets (camera detector keypoints localiser cli)
+#   deploy/build-images.sh camera localiser # only these targets (camera detector keypoints localiser cli prometheus)
 #   deploy/build-images.sh --release bookworm  # base release on a non-Debian host (default: the host's)
 #
 # Images: conesight/<target>:latest and conesight/<target>:<git short rev>. The build context is
@@ -29,6 +29,10 @@ declare -A BINARY=(
     [localiser]=conesight-localiser
     [cli]=conesight
 )
+# Targets that copy a Debian program of the host instead of a cargo binary.
+declare -A HOST_PROGRAM=(
+    [prometheus]=/usr/bin/prometheus
+)
 ORT_LIB="build/onnxruntime/libonnxruntime.so.1.31.1"
 
 run_cargo=1
@@ -42,8 +46,8 @@ while [[ $# -gt 0 ]]; do
         -h | --help) sed -n '2,10p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; exit 0 ;;
         -*) echo "build-images.sh: unknown option $arg" >&2; exit 2 ;;
         *)
-            if [[ -z "${PACKAGE[$arg]:-}" ]]; then
-                echo "build-images.sh: unknown target $arg (one of ${ALL_TARGETS[*]})" >&2
+            if [[ -z "${PACKAGE[$arg]:-}" && -z "${HOST_PROGRAM[$arg]:-}" ]]; then
+                echo "build-images.sh: unknown target $arg (one of ${ALL_TARGETS[*]} ${!HOST_PROGRAM[*]})" >&2
                 exit 2
             fi
             targets+=("$arg")
@@ -99,6 +103,17 @@ for model in detector keypoints; do
 done
 cp models/README.md "$ctx/models/"
 cp deploy/zenoh/*.json5 "$ctx/zenoh/"
+mkdir -p "$ctx/prometheus"
+cp deploy/prometheus/prometheus.yml deploy/prometheus/alerts.yml "$ctx/prometheus/"
+for t in "${targets[@]}"; do
+    program="${HOST_PROGRAM[$t]:-}"
+    [[ -z "$program" ]] && continue
+    if [[ ! -x "$program" ]]; then
+        echo "build-images.sh: $program missing (apt-get install $t, or scripts/setup.sh)" >&2
+        exit 1
+    fi
+    cp "$program" "$ctx/prometheus/"
+done
 shopt -u nullglob
 
 # Docker CLIs from 23 on use BuildKit through buildx; without the buildx plugin (as on our

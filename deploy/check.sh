@@ -31,6 +31,7 @@ fi
 cases=(
     "docker-compose.yml||"
     "docker-compose.yml|tools|"
+    "docker-compose.yml|monitoring|"
     "docker-compose.yml||CONESIGHT_CAMERA_FLAGS=--publish-boxes"
     "deploy/compose.split.yml|jetson|"
     "deploy/compose.split.yml|carpc|JETSON_ADDR=192.0.2.10"
@@ -82,6 +83,24 @@ done
 for f in deploy/zenoh/peer.json5 deploy/zenoh/router.json5; do
     if [[ -f "$f" ]]; then ok "$f present"; else fail "$f missing"; fi
 done
+
+# --- Prometheus config and alert rules --------------------------------------------------------
+if command -v promtool >/dev/null; then
+    if promtool check config deploy/prometheus/prometheus.yml >/dev/null \
+        && promtool check rules deploy/prometheus/alerts.yml \
+        && promtool test rules deploy/prometheus/alerts_test.yml; then
+        ok "promtool: deploy/prometheus config, rules and rule tests"
+    else
+        fail "promtool: deploy/prometheus config, rules or rule tests"
+    fi
+else
+    skip "promtool (not installed: apt-get install prometheus)"
+fi
+if python3 -m json.tool deploy/grafana/conesight-dashboard.json >/dev/null; then
+    ok "deploy/grafana/conesight-dashboard.json is JSON"
+else
+    fail "deploy/grafana/conesight-dashboard.json is not JSON"
+fi
 
 # --- scripts ----------------------------------------------------------------------------------
 if command -v shellcheck >/dev/null; then

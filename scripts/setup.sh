@@ -52,6 +52,11 @@ elif ! pkg-config --exists gstreamer-app-1.0 gstreamer-video-1.0 2>/dev/null \
   || ! command -v gst-launch-1.0 >/dev/null 2>&1; then
   need_apt+=("${GST_PACKAGES[@]}")
 fi
+# Prometheus and promtool (Debian's): the presence test scrapes the services with it,
+# deploy/check.sh checks the alert rules, the image of compose's `monitoring` profile carries it.
+if [ "$MODE" = all ] && ! { command -v prometheus && command -v promtool; } >/dev/null 2>&1; then
+  need_apt+=(prometheus)
+fi
 if [ ${#need_apt[@]} -gt 0 ]; then
   if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
     log "installing Debian packages: ${need_apt[*]}"

@@ -50,9 +50,14 @@ pub struct Process {
 impl Process {
     /// `conesight ARGS`, stdout and stderr into `log` (`.out` beside it for stdout).
     pub fn start(name: &str, args: &[&str], log: &Path) -> Self {
+        Self::start_program(name, BIN, args, log)
+    }
+
+    /// `program ARGS`, as [`Process::start`].
+    pub fn start_program(name: &str, program: &str, args: &[&str], log: &Path) -> Self {
         let stderr = std::fs::File::create(log).unwrap();
         let stdout = std::fs::File::create(log.with_extension("out")).unwrap();
-        let child = Command::new(BIN)
+        let child = Command::new(program)
             .args(args)
             .stdin(Stdio::null())
             .stdout(stdout)

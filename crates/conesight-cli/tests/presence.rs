@@ -141,6 +141,97 @@ fn names(status: &[Value]) -> BTreeSet<String> {
         .collect()
 }
 
+/// A Prometheus API answer as JSON (HTTP/1.0, so Go's server sends no chunked encoding).
+fn prometheus_api(port: u16, path: &str) -> Option<Value> {
+    use std::io::{Read, Write};
+    let mut stream = std::net::TcpStream::connect(("127.0.0.1", port)).ok()?;
+    stream.set_read_timeout(Some(Duration::from_secs(5))).ok()?;
+    write!(stream, "GET {path} HTTP/1.0\r\nHost: 127.0.0.1\r\n\r\n").ok()?;
+    let mut response = String::new();
+    stream.read_to_string(&mut response).ok()?;
+    let (_, body) = response.split_once("\r\n\r\n")?;
+    serde_json::from_str(body).ok()
+}
+
+/// Runs `prometheus` on deploy/prometheus's config and rules with the four services as
+/// targets; checks its targets API shows them up and a query sees every service's labels.
+fn scrape_with_prometheus(pipeline: &Pipeline, dir: &TempDir) {
+    if Command::new("prometheus")
+        .arg("--version")
+        .output()
+        .is_err()
+    {
+        eprintln!(
+            "SKIPPED the Prometheus scrape: no `prometheus` binary (scripts/setup.sh installs Debian's)"
+        );
+        return;
+    }
+    let deploy = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../deploy/prometheus");
+    let config = std::fs::read_to_string(deploy.join("prometheus.yml")).unwrap();
+    let targets: Vec<String> = SERVICES
+        .iter()
+        .map(|s| format!("\"127.0.0.1:{}\"", pipeline.http_port(s)))
+        .collect();
+    let config = config
+        .replace(
+            "[\"camera:9090\", \"detector:9090\", \"keypoints:9090\", \"localiser:9090\"]",
+            &format!("[{}]", targets.join(", ")),
+        )
+        .replace("scrape_interval: 5s", "scrape_interval: 1s");
+    assert!(
+        config.contains(&targets[0]),
+        "the targets line of prometheus.yml changed"
+    );
+    std::fs::write(dir.join("prometheus.yml"), config).unwrap();
+    std::fs::copy(deploy.join("alerts.yml"), dir.join("alerts.yml")).unwrap();
+    let port = free_port();
+    let _prometheus = Process::start_program(
+        "prometheus",
+        "prometheus",
+        &[
+            &format!("--config.file={}", dir.join("prometheus.yml").display()),
+            &format!("--storage.tsdb.path={}", dir.join("tsdb").display()),
+            &format!("--web.listen-address=127.0.0.1:{port}"),
+        ],
+        &dir.join("prometheus.log"),
+    );
+    let started = Instant::now();
+    let up = loop {
+        let up = prometheus_api(port, "/api/v1/targets")
+            .map(|targets| {
+                targets["data"]["activeTargets"]
+                    .as_array()
+                    .map(|t| t.iter().filter(|t| t["health"] == "up").count())
+                    .unwrap_or(0)
+            })
+            .unwrap_or(0);
+        if up == 4 || started.elapsed() > Duration::from_secs(60) {
+            break up;
+        }
+        std::thread::sleep(Duration::from_millis(250));
+    };
+    assert_eq!(up, 4, "Prometheus targets up: {up}");
+    let query = "/api/v1/query?query=count%20by%20(service)%20(conesight_build_info)";
+    let answer = prometheus_api(port, query).unwrap();
+    let services: BTreeSet<&str> = answer["data"]["result"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| r["metric"]["service"].as_str().unwrap())
+        .collect();
+    assert_eq!(services, SERVICES.into_iter().collect(), "{answer}");
+    let rules = prometheus_api(port, "/api/v1/rules").unwrap();
+    let loaded = rules["data"]["groups"][0]["rules"]
+        .as_array()
+        .unwrap()
+        .len();
+    assert!(loaded >= 6, "{rules}");
+    eprintln!(
+        "Prometheus: 4 targets up after {:.1} s, {loaded} alert rules loaded",
+        started.elapsed().as_secs_f64()
+    );
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn services_answer_queries_and_status_follows_them() {
     let dir = TempDir::new("presence");
@@ -355,6 +446,10 @@ async fn services_answer_queries_and_status_follows_them() {
     assert!(cones_by_class > 0.0, "{body}");
     let age = metric(&body, "conesight_input_age_seconds{service=\"localiser\"}").unwrap();
     assert!((0.0..2.0).contains(&age), "input age {age}");
+
+    // Prometheus (Debian's, as in compose's `monitoring` profile) scrapes all four, with our
+    // alert rules loaded.
+    scrape_with_prometheus(&pipeline, &dir);
 
     // Kill one service: `status --watch` sees it leave within 2 s, `status` lists 3.
     let watch_log = dir.join("watch.log");

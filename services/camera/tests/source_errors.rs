@@ -44,7 +44,7 @@ impl Running {
         args.camera_info = Some(yaml);
         args.source_timeout_ms = 200;
         let source = load_source(&args, false).await.unwrap();
-        let node = Node::new("camera", session.clone(), topics, None);
+        let node = Node::new("camera", "front", session.clone(), topics, None);
         let shutdown = Shutdown::new();
         let task = tokio::spawn({
             let (node, shutdown) = (node.clone(), shutdown.clone());
