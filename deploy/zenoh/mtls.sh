@@ -77,6 +77,9 @@ acl() {
       // and health/manifest/schema (answers go to observers only: to_observer).
       { id: "announce", messages: ["declare_queryable", "liveliness_token"],
         flows: ["egress", "ingress"], permission: "allow", key_exprs: ["conesight/**", $services_key] },
+      // Answers to a node's own queries (only observers query; the senders only reply to them).
+      { id: "answers", messages: ["reply"], flows: ["ingress"], permission: "allow",
+        key_exprs: ["conesight/**", $services_key] },
     ],
     subjects: [
       { id: "camera", cert_common_names: ["camera"] },
@@ -92,7 +95,7 @@ acl() {
       { id: "keypoints", subjects: ["keypoints"], rules: ["keypoints_puts", "keypoints_reads", "to_keypoints"] },
       { id: "localiser", subjects: ["localiser"], rules: ["localiser_puts", "localiser_reads", "to_localiser"] },
       { id: "observer", subjects: ["observer"], rules: ["observer_reads", "to_observer"] },
-      { id: "member", subjects: ["member"], rules: ["own_interest", "announce"] },
+      { id: "member", subjects: ["member"], rules: ["own_interest", "announce", "answers"] },
     ],
   },
 EOF

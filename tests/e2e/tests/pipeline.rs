@@ -382,10 +382,49 @@ async fn pipeline_at_10_hz_on_mtls_and_its_cost_against_the_plain_bus() {
         if mtls {
             cluster = cluster.with_mtls(&zenoh_dir);
         }
-        let (_observer, received) = start_and_collect(&mut cluster, 40).await;
+        let (observer, received) = start_and_collect(&mut cluster, 40).await;
         let shm = cluster.metric("keypoints", "conesight_shared_memory_messages_total");
         if mtls {
             assert_within_model_accuracy(&fixture, &received, "mTLS with access control");
+            // The dashboard's certificate may query: every service's manifest and the latest
+            // cones answer through the access-control list.
+            let topics = conesight_bus::Topics::new(namespace, "car").unwrap();
+            let answers = |key: conesight_bus::zenoh::key_expr::KeyExpr<'static>| {
+                let session = observer.session.clone();
+                async move {
+                    let replies = session
+                        .get(key)
+                        .timeout(Duration::from_secs(3))
+                        .await
+                        .unwrap();
+                    let mut count = 0;
+                    while let Ok(reply) = replies.recv_async().await {
+                        count += usize::from(reply.result().is_ok());
+                    }
+                    count
+                }
+            };
+            let manifests = answers(
+                topics
+                    .all_services_query(conesight_bus::ServiceQuery::Manifest)
+                    .unwrap(),
+            )
+            .await;
+            assert_eq!(manifests, 4, "manifests answered on mTLS");
+            let latest = answers(topics.key("front", conesight_bus::Stream::Cones).unwrap()).await;
+            assert_eq!(latest, 1, "latest cones answered on mTLS");
+            let tokens = observer
+                .session
+                .liveliness()
+                .get(topics.all_services().unwrap())
+                .timeout(Duration::from_secs(3))
+                .await
+                .unwrap();
+            let mut live = 0;
+            while let Ok(reply) = tokens.recv_async().await {
+                live += usize::from(reply.result().is_ok());
+            }
+            assert_eq!(live, 4, "liveliness tokens seen on mTLS");
         }
         // Skip the first messages (links and declarations settling).
         let latency: Vec<f64> = received.iter().skip(10).map(|r| r.latency_secs).collect();
