@@ -12,6 +12,7 @@
 //!   last input fresh).
 //! - [`http`]: [`router`] (`/livez`, `/readyz`, `/metrics`), [`HttpArgs`] and [`serve`].
 //! - [`mod@healthcheck`]: [`healthcheck()`], an HTTP GET of `/readyz` for containers without curl.
+//! - [`refusals`]: messages Zenoh refuses over its receive limit, counted from its trace event.
 //! - [`errors`]: [`ErrorReporter`], counting every error by kind and logging at most one per
 //!   kind per interval.
 //! - [`worker`]: [`Worker`], heavy work on its own thread fed by a slot of 1 (newest wins).
@@ -24,6 +25,7 @@ pub mod health;
 pub mod healthcheck;
 pub mod http;
 pub mod metrics;
+pub mod refusals;
 mod shutdown;
 mod telemetry;
 pub mod worker;

@@ -16,6 +16,7 @@
 //! | `conesight_detector_coverage_ratio` | gauge | (detector) share of the frame it covers |
 //! | `conesight_cones_published_total` | counter | `class` (localiser) |
 //! | `conesight_input_age_seconds` | gauge | seconds since the latest input (since start before the first) |
+//! | `conesight_zenoh_refused_messages_total` | counter | messages Zenoh refused over its receive limit, in this process ([`crate::refusals`]) |
 //! | `conesight_build_info` | gauge (1) | `version`, `git_revision`, `model`, `model_sha256` |
 //!
 //! A service's registry ([`Metrics::for_service`]) adds the labels `service` and `camera` to
@@ -72,6 +73,8 @@ pub struct Metrics {
     cones_published: Family<OneLabel, Counter>,
     input_age: Gauge<f64, AtomicU64>,
     build_info: Family<Vec<(&'static str, String)>, Gauge>,
+    zenoh_refused: Counter,
+    zenoh_refused_seen: AtomicU64,
 }
 
 /// What `conesight_build_info` says: the build and the model a service runs.
@@ -130,6 +133,12 @@ impl Metrics {
         let cones_published = Family::<OneLabel, Counter>::default();
         let input_age = Gauge::<f64, AtomicU64>::default();
         let build_info = Family::<Vec<(&'static str, String)>, Gauge>::default();
+        let zenoh_refused = Counter::default();
+        registry.register(
+            "zenoh_refused_messages",
+            "Messages Zenoh refused before buffering them: over its receive limit (--max-message-mb + 16 MiB), in this process",
+            zenoh_refused.clone(),
+        );
         registry.register(
             "cones_published",
             "Cones published, by class (localiser)",
@@ -218,6 +227,8 @@ impl Metrics {
             cones_published,
             input_age,
             build_info,
+            zenoh_refused,
+            zenoh_refused_seen: AtomicU64::new(0),
         }
     }
 
@@ -349,6 +360,11 @@ impl Metrics {
 
     /// The metrics in the Prometheus (OpenMetrics) text format.
     pub fn encode(&self) -> String {
+        let total = crate::refusals::refused_messages();
+        let seen = self
+            .zenoh_refused_seen
+            .swap(total, std::sync::atomic::Ordering::Relaxed);
+        self.zenoh_refused.inc_by(total.saturating_sub(seen));
         let mut text = String::new();
         // Writing into a String cannot fail.
         let _ = encode(&mut text, &self.registry);

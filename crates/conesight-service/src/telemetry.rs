@@ -8,6 +8,12 @@ use std::path::Path;
 use std::sync::Mutex;
 
 use tracing_subscriber::EnvFilter;
+use tracing_subscriber::Layer;
+use tracing_subscriber::filter::filter_fn;
+use tracing_subscriber::layer::SubscriberExt;
+use tracing_subscriber::util::SubscriberInitExt;
+
+use crate::refusals::{RefusalCounter, is_refusal_event};
 
 /// Filter used when `RUST_LOG` is unset or invalid: our crates at info, ONNX Runtime and
 /// Zenoh only from warn (their info lines drown the services' own).
@@ -23,12 +29,17 @@ where
 {
     let filter =
         EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new(DEFAULT_LOG_FILTER));
-    // Err only when a subscriber is already installed, which is fine.
-    let _ = tracing_subscriber::fmt()
-        .with_env_filter(filter)
+    let logs = tracing_subscriber::fmt::layer()
         .with_target(true)
         .with_ansi(ansi)
         .with_writer(writer)
+        .with_filter(filter);
+    // Zenoh's refusals of oversize messages are counted whatever RUST_LOG says.
+    let refusals = RefusalCounter.with_filter(filter_fn(is_refusal_event));
+    // Err only when a subscriber is already installed, which is fine.
+    let _ = tracing_subscriber::registry()
+        .with(logs)
+        .with(refusals)
         .try_init();
 }
 
