@@ -53,8 +53,9 @@ pub struct CommonArgs {
     pub max_input_age_ms: u64,
 }
 
-/// How far over `--max-message-mb` Zenoh still delivers a message (so the service counts it).
-pub const ZENOH_RX_HEADROOM_BYTES: usize = 16 << 20;
+/// How far over `--max-message-mb` Zenoh still delivers a message: room for Zenoh's own framing
+/// of a message of exactly the limit (its key, encoding and fragment headers).
+pub const ZENOH_RX_HEADROOM_BYTES: usize = 64 << 10;
 
 /// Default of `--max-input-age-ms` ([`crate::gate::DEFAULT_MAX_AGE`]).
 pub const DEFAULT_MAX_INPUT_AGE_MS: u64 = 2_000;
@@ -85,10 +86,11 @@ impl CommonArgs {
         self.max_message_mb.saturating_mul(1 << 20)
     }
 
-    /// The Zenoh arguments with Zenoh's own receive limit following `--max-message-mb`: a
-    /// message up to [`ZENOH_RX_HEADROOM_BYTES`] over it still arrives and is counted as
-    /// `oversize` by the service; a larger one is refused by Zenoh, fragment by fragment,
-    /// before it is buffered (Zenoh logs it at trace level only, so it is not counted).
+    /// The Zenoh arguments with Zenoh's own receive limit following `--max-message-mb` (plus
+    /// [`ZENOH_RX_HEADROOM_BYTES`] for its framing): a larger message is refused by Zenoh,
+    /// fragment by fragment, before it is buffered whole, and counted in
+    /// `conesight_zenoh_refused_messages_total` (`conesight_service::refusals`); one within the
+    /// headroom arrives and is counted by the service as `oversize`.
     pub fn zenoh_with_limits(&self) -> ZenohArgs {
         let mut zenoh = self.zenoh.clone();
         zenoh.rx_max_message_bytes = Some(

@@ -136,7 +136,7 @@ impl Metrics {
         let zenoh_refused = Counter::default();
         registry.register(
             "zenoh_refused_messages",
-            "Messages Zenoh refused before buffering them: over its receive limit (--max-message-mb + 16 MiB), in this process",
+            "Messages Zenoh refused before buffering them: over its receive limit (--max-message-mb), in this process",
             zenoh_refused.clone(),
         );
         registry.register(
