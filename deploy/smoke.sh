@@ -8,6 +8,7 @@
 #   deploy/smoke.sh --split    # both sides of deploy/compose.split.yml on this machine
 #                              # (JETSON_ADDR=127.0.0.1, two compose projects)
 #   deploy/smoke.sh --truth    # renderer's exact boxes from the camera, no detector
+#   deploy/smoke.sh --monitoring  # one host plus Prometheus (profile monitoring): all 4 targets up
 #   deploy/smoke.sh --keep     # leave the stack running
 set -euo pipefail
 
@@ -17,12 +18,14 @@ cd "$ROOT"
 split=0
 keep=0
 truth=0
+monitoring=0
 timeout_secs="${SMOKE_TIMEOUT_SECS:-180}"
 for arg in "$@"; do
     case "$arg" in
         --split) split=1 ;;
         --keep) keep=1 ;;
         --truth) truth=1 ;;
+        --monitoring) monitoring=1 ;;
         -h | --help) sed -n '2,12p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; exit 0 ;;
         *) echo "smoke.sh: unknown argument $arg" >&2; exit 2 ;;
     esac
@@ -43,7 +46,9 @@ if [[ $truth -eq 1 ]]; then
     detector_service=""
 fi
 if [[ $split -eq 0 ]]; then
-    stacks=("conesight|-f docker-compose.yml|camera:9091${detector_service} keypoints:9093 localiser:9094")
+    profile=""
+    [[ $monitoring -eq 1 ]] && profile=" --profile monitoring"
+    stacks=("conesight|-f docker-compose.yml${profile}|camera:9091${detector_service} keypoints:9093 localiser:9094")
 else
     export JETSON_ADDR=127.0.0.1
     stacks=(
@@ -142,5 +147,20 @@ for s in "${stacks[@]}"; do
         fi
     done
 done
+if [[ $monitoring -eq 1 ]]; then
+    # Prometheus's targets API: every service's health "up" (it scrapes every 5 s).
+    want=$((${#first[@]}))
+    up=0
+    for _ in $(seq 1 30); do
+        up="$(curl -fsS "http://127.0.0.1:${PROMETHEUS_PORT:-9099}/api/v1/targets" 2>/dev/null |
+            grep -o '"health":"up"' | wc -l || true)"
+        [[ "$up" -ge "$want" ]] && break
+        sleep 2
+    done
+    echo "smoke.sh: Prometheus targets up: $up of $want"
+    curl -fsS "http://127.0.0.1:${PROMETHEUS_PORT:-9099}/api/v1/targets" |
+        grep -o '"scrapeUrl":"[^"]*"\|"health":"[a-z]*"' | paste - - || true
+    [[ "$up" -ge "$want" ]] || failed=1
+fi
 [[ $failed -eq 0 ]] || exit 1
 echo "smoke.sh: PASS (no restarts)"
