@@ -57,6 +57,10 @@ fi
 if [ "$MODE" = all ] && ! { command -v prometheus && command -v promtool; } >/dev/null 2>&1; then
   need_apt+=(prometheus)
 fi
+# Chromium (Debian's): the dashboard test loads the page in it headless.
+if [ "$MODE" = all ] && ! command -v chromium >/dev/null 2>&1; then
+  need_apt+=(chromium)
+fi
 if [ ${#need_apt[@]} -gt 0 ]; then
   if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
     log "installing Debian packages: ${need_apt[*]}"

@@ -12,10 +12,12 @@
 //! - `diff`: the cones of two recordings compared by range band ([`diff_cmd`]).
 //! - `status`: the live services of a namespace with their health ([`status_cmd`]).
 //! - `echo`: a stream's messages as JSON lines ([`echo_cmd`]).
+//! - `dashboard`: the web page of a run: cone map, annotated frame, services ([`dashboard`]).
 //! - `eval`: the paper's experiments on the held-out synthetic set ([`conesight_eval::cli`]);
 //!   `make eval` runs the same through the `conesight-eval` binary and writes the report.
 
 mod bev;
+mod dashboard;
 mod demo;
 mod demo_frame;
 mod diff_cmd;
@@ -69,6 +71,9 @@ enum Command {
     Status(status_cmd::StatusArgs),
     /// A stream's messages as JSON lines (the latest first, then as they come).
     Echo(echo_cmd::EchoArgs),
+    /// A web page of a run: live bird's-eye map of the cones, the annotated frame, rates,
+    /// latency and the services' health (http://127.0.0.1:8080/ by default).
+    Dashboard(dashboard::DashboardArgs),
 }
 
 /// The git revision the binary was built from (`build.rs`; `unknown` outside a checkout).
@@ -90,6 +95,7 @@ fn main() -> anyhow::Result<std::process::ExitCode> {
         // Exit status 1 when no service is live.
         Command::Status(args) => return status_cmd::run(&args),
         Command::Echo(args) => echo_cmd::run(&args)?,
+        Command::Dashboard(args) => dashboard::run(&args)?,
     }
     Ok(std::process::ExitCode::SUCCESS)
 }

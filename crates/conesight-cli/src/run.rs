@@ -126,6 +126,9 @@ pub struct RunArgs {
     /// (camera, detector, keypoints, localiser order); none when absent.
     #[arg(long = "http-base-port")]
     http_base_port: Option<u16>,
+    /// Serve the web dashboard of this run here too (e.g. 127.0.0.1:8080).
+    #[arg(long)]
+    dashboard: Option<std::net::SocketAddr>,
     /// Output folder for the PNGs.
     #[arg(long, default_value = "out/run")]
     out: PathBuf,
@@ -212,6 +215,10 @@ async fn run_async(args: RunArgs) -> anyhow::Result<()> {
         open_session(&CommonArgs::for_camera(args.zenoh.clone(), &args.camera).zenoh_with_limits())
             .await?;
     let topics = Topics::from_args(&args.zenoh)?;
+    if let Some(addr) = args.dashboard {
+        let bound = crate::dashboard::serve(&session, &topics, addr, &shutdown).await?;
+        println!("dashboard: http://{bound}/");
+    }
     let common = |name: ServiceName| {
         let mut common = CommonArgs::for_camera(args.zenoh.clone(), &args.camera);
         if let Some(base) = args.http_base_port {

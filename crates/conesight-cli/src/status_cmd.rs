@@ -29,12 +29,12 @@ pub struct StatusArgs {
 }
 
 /// One live service as listed.
-#[derive(Debug, Serialize)]
-struct ServiceStatus {
-    service: String,
-    zid: String,
+#[derive(Debug, Clone, Serialize)]
+pub(crate) struct ServiceStatus {
+    pub(crate) service: String,
+    pub(crate) zid: String,
     /// `null` when the service holds a token but did not answer the health query in time.
-    health: Option<Health>,
+    pub(crate) health: Option<Health>,
 }
 
 /// One join or leave seen by `--watch`.
@@ -93,7 +93,7 @@ async fn list(
 }
 
 /// The services holding a liveliness token now, each with its health answer.
-async fn live_services(
+pub(crate) async fn live_services(
     session: &conesight_bus::zenoh::Session,
     topics: &Topics,
     timeout: Duration,

@@ -1,0 +1,311 @@
+//! The web dashboard in a real headless Chromium: `conesight run --dashboard` (the four
+//! services and the page in one process), Chromium opened on the page and driven over the
+//! DevTools protocol. Two screenshots 1 s apart: the cone map is not empty in either and it
+//! changed; the DOM lists cones, a new frame sequence and the four services. The screenshots
+//! are saved under `target/artefacts/`.
+#![allow(clippy::unwrap_used, clippy::expect_used, missing_docs)]
+
+mod common_process;
+
+use std::io::{BufRead, BufReader};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use base64::Engine;
+use common_process::{Process, TempDir, free_port, http_get};
+use futures_util::{SinkExt, StreamExt};
+use serde_json::{Value, json};
+use tokio_tungstenite::tungstenite::Message;
+
+type Socket =
+    tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
+
+/// One DevTools call on the page's socket: its `result`.
+async fn call(socket: &mut Socket, id: u64, method: &str, params: Value) -> Value {
+    let request = json!({ "id": id, "method": method, "params": params });
+    socket
+        .send(Message::Text(request.to_string().into()))
+        .await
+        .unwrap();
+    loop {
+        let message = tokio::time::timeout(Duration::from_secs(60), socket.next())
+            .await
+            .expect("DevTools answer within 60 s")
+            .unwrap()
+            .unwrap();
+        if let Message::Text(text) = message {
+            let answer: Value = serde_json::from_str(&text).unwrap();
+            if answer["id"] == id {
+                assert!(answer.get("error").is_none(), "{method}: {answer}");
+                return answer["result"].clone();
+            }
+        }
+    }
+}
+
+/// Evaluates `expression` in the page; its value.
+async fn eval(socket: &mut Socket, id: u64, expression: &str) -> Value {
+    let result = call(
+        socket,
+        id,
+        "Runtime.evaluate",
+        json!({ "expression": expression, "returnByValue": true }),
+    )
+    .await;
+    result["result"]["value"].clone()
+}
+
+/// `GET path` on Chromium's DevTools HTTP server (it keeps the connection open, so the body is
+/// read by its Content-Length).
+fn devtools_get(port: u16, path: &str) -> Option<String> {
+    use std::io::{Read, Write};
+    let mut stream = std::net::TcpStream::connect(("127.0.0.1", port)).ok()?;
+    stream.set_read_timeout(Some(Duration::from_secs(5))).ok()?;
+    write!(
+        stream,
+        "GET {path} HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\n\r\n"
+    )
+    .ok()?;
+    let mut reader = BufReader::new(stream);
+    let mut length = 0;
+    loop {
+        let mut line = String::new();
+        reader.read_line(&mut line).ok()?;
+        let line = line.trim_end();
+        if line.is_empty() {
+            break;
+        }
+        if let Some((name, value)) = line.split_once(':')
+            && name.eq_ignore_ascii_case("content-length")
+        {
+            length = value.trim().parse().ok()?;
+        }
+    }
+    let mut body = vec![0; length];
+    reader.read_exact(&mut body).ok()?;
+    String::from_utf8(body).ok()
+}
+
+/// Pixels of `png` inside `rect` (x, y, w, h in CSS pixels = device pixels here).
+fn crop(png: &[u8], rect: [u32; 4]) -> image::RgbImage {
+    let image = image::load_from_memory(png).unwrap().to_rgb8();
+    image::imageops::crop_imm(&image, rect[0], rect[1], rect[2], rect[3]).to_image()
+}
+
+/// Pixels of the map in a cone colour (saturated: blue, yellow or orange).
+fn cone_pixels(map: &image::RgbImage) -> usize {
+    map.pixels()
+        .filter(|p| {
+            let [r, g, b] = p.0.map(i32::from);
+            let (max, min) = (r.max(g).max(b), r.min(g).min(b));
+            max - min > 120
+        })
+        .count()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn dashboard_in_chromium_shows_cones_that_move() {
+    let chromium = ["chromium", "chromium-browser", "google-chrome"]
+        .into_iter()
+        .find(|c| Command::new(c).arg("--version").output().is_ok());
+    let Some(chromium) = chromium else {
+        eprintln!("SKIPPED: no chromium (scripts/setup.sh installs Debian's `chromium`)");
+        return;
+    };
+    let dir = TempDir::new("dashboard");
+    let port = free_port();
+    let addr = format!("127.0.0.1:{port}");
+    let listen = format!("tcp/127.0.0.1:{}", free_port());
+    let _run = Process::start(
+        "run",
+        &[
+            "run",
+            "--frames",
+            "0",
+            "--rate-hz",
+            "5",
+            "--preload",
+            "10",
+            "--namespace",
+            &format!("dashboard{}", std::process::id()),
+            "--zenoh-listen",
+            &listen,
+            "--dashboard",
+            &addr,
+            "--out",
+            dir.join("out").to_str().unwrap(),
+            "--log-file",
+            dir.join("run.log").to_str().unwrap(),
+        ],
+        &dir.join("run.stderr"),
+    );
+    let started = Instant::now();
+    loop {
+        let cones = http_get(port, "/api/state")
+            .and_then(|body| serde_json::from_str::<Value>(&body).ok())
+            .map_or(0, |state| state["cones"].as_array().map_or(0, Vec::len));
+        if cones > 0 {
+            break;
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(180),
+            "no cones on /api/state"
+        );
+        std::thread::sleep(Duration::from_millis(500));
+    }
+
+    let profile = dir.join("chromium-profile");
+    let mut browser = Command::new(chromium)
+        .args([
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--hide-scrollbars",
+            "--window-size=1300,900",
+            "--remote-debugging-port=0",
+            &format!("--user-data-dir={}", profile.display()),
+            &format!("http://{addr}/"),
+        ])
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // "DevTools listening on ws://127.0.0.1:PORT/devtools/browser/..."
+    // Read on in a thread: a closed pipe would end Chromium at its next log line.
+    let mut stderr = BufReader::new(browser.stderr.take().unwrap()).lines();
+    let devtools_port: u16 = stderr
+        .by_ref()
+        .map_while(Result::ok)
+        .find_map(|line| {
+            let rest = line.split("DevTools listening on ws://127.0.0.1:").nth(1)?;
+            rest.split('/').next()?.parse().ok()
+        })
+        .expect("chromium printed its DevTools port");
+    std::thread::spawn(move || stderr.for_each(drop));
+    let targets: Value =
+        serde_json::from_str(&devtools_get(devtools_port, "/json/list").unwrap()).unwrap();
+    let page = targets
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|t| t["type"] == "page")
+        .expect("a page target");
+    // Chromium may name itself `localhost`, which can resolve to ::1 where it does not listen.
+    let url = page["webSocketDebuggerUrl"]
+        .as_str()
+        .unwrap()
+        .replace("ws://localhost:", "ws://127.0.0.1:");
+    let (mut socket, _) = tokio_tungstenite::connect_async(url.as_str())
+        .await
+        .unwrap_or_else(|error| panic!("{url}: {error}"));
+
+    let state = r#"JSON.stringify({
+        count: Number(document.getElementById("cone-count").textContent),
+        sequence: document.getElementById("sequence").textContent,
+        cones: document.getElementById("cones-json").textContent,
+        services: Number(document.body.dataset.services || 0),
+        map: (() => { const r = document.getElementById("map").getBoundingClientRect();
+                      return [r.x, r.y, r.width, r.height].map(Math.round); })(),
+        frameLoaded: document.getElementById("frame").naturalWidth > 0 })"#;
+    let mut id = 0;
+    // Null while the page is still loading (its elements not there yet).
+    let read = |value: Value| -> Value {
+        value
+            .as_str()
+            .and_then(|text| serde_json::from_str(text).ok())
+            .unwrap_or(Value::Null)
+    };
+    let loaded = Instant::now();
+    let first = loop {
+        id += 1;
+        let dom = read(eval(&mut socket, id, state).await);
+        if dom["count"].as_u64().unwrap_or(0) > 0
+            && dom["services"] == 4
+            && dom["frameLoaded"] == true
+        {
+            break dom;
+        }
+        assert!(
+            loaded.elapsed() < Duration::from_secs(90),
+            "the page never showed cones, 4 services and a frame: {dom}"
+        );
+        tokio::time::sleep(Duration::from_millis(250)).await;
+    };
+    let shot = |result: Value| {
+        base64::engine::general_purpose::STANDARD
+            .decode(result["data"].as_str().unwrap())
+            .unwrap()
+    };
+    id += 1;
+    let png1 = shot(
+        call(
+            &mut socket,
+            id,
+            "Page.captureScreenshot",
+            json!({ "format": "png" }),
+        )
+        .await,
+    );
+    tokio::time::sleep(Duration::from_secs(1)).await;
+    id += 1;
+    let second = read(eval(&mut socket, id, state).await);
+    id += 1;
+    let png2 = shot(
+        call(
+            &mut socket,
+            id,
+            "Page.captureScreenshot",
+            json!({ "format": "png" }),
+        )
+        .await,
+    );
+    let _ = browser.kill();
+    let _ = browser.wait();
+
+    let artefacts = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .parent()
+        .unwrap()
+        .join("artefacts");
+    std::fs::create_dir_all(&artefacts).unwrap();
+    std::fs::write(artefacts.join("dashboard-1.png"), &png1).unwrap();
+    std::fs::write(artefacts.join("dashboard-2.png"), &png2).unwrap();
+
+    let rect: Vec<u32> = first["map"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| u32::try_from(v.as_i64().unwrap()).unwrap())
+        .collect();
+    let rect = [rect[0], rect[1], rect[2], rect[3]];
+    let (map1, map2) = (crop(&png1, rect), crop(&png2, rect));
+    let changed = map1
+        .pixels()
+        .zip(map2.pixels())
+        .filter(|(a, b)| a != b)
+        .count();
+    eprintln!(
+        "dashboard: {} then {} cones (frames {} -> {}), cone-coloured map pixels {} and {}, {changed} map pixels changed in 1 s; screenshots in {}",
+        first["count"],
+        second["count"],
+        first["sequence"],
+        second["sequence"],
+        cone_pixels(&map1),
+        cone_pixels(&map2),
+        artefacts.display()
+    );
+    assert!(
+        cone_pixels(&map1) > 100 && cone_pixels(&map2) > 100,
+        "an empty map"
+    );
+    assert!(second["count"].as_u64().unwrap() > 0);
+    assert_ne!(first["sequence"], second["sequence"], "no new frame in 1 s");
+    assert_ne!(
+        first["cones"], second["cones"],
+        "the cones did not change in 1 s"
+    );
+    assert!(
+        changed > 50,
+        "the map did not change in 1 s ({changed} pixels)"
+    );
+}
