@@ -10,13 +10,17 @@
 //! - `record`: the bus of a run into MCAP files ([`record_cmd`]).
 //! - `replay`: recorded frames and camera info back onto the bus ([`replay_cmd`]).
 //! - `diff`: the cones of two recordings compared by range band ([`diff_cmd`]).
+//! - `job`, `aggregate`: replay jobs at scale, one shard of a recording list per worker, and
+//!   the merge of their results ([`job_cmd`], [`aggregate_cmd`]).
 //! - `eval`: the paper's experiments on the held-out synthetic set ([`conesight_eval::cli`]);
 //!   `make eval` runs the same through the `conesight-eval` binary and writes the report.
 
+mod aggregate_cmd;
 mod bev;
 mod demo;
 mod demo_frame;
 mod diff_cmd;
+mod job_cmd;
 mod keypoints_cmd;
 mod predict;
 mod record_cmd;
@@ -60,6 +64,11 @@ enum Command {
     Replay(replay_cmd::ReplayArgs),
     /// Compare the cones of two recordings of the same drive, per range band; PNG plots.
     Diff(diff_cmd::DiffArgs),
+    /// One worker of a replay job: its shard of a recording list through the pipeline in this
+    /// process, a results MCAP and a summary JSON per recording (swarm, Kubernetes Indexed Job).
+    Job(job_cmd::JobArgs),
+    /// Merge the summaries of a job's results folder; `--baseline` compares two model versions.
+    Aggregate(aggregate_cmd::AggregateArgs),
 }
 
 /// The git revision the binary was built from (`build.rs`; `unknown` outside a checkout).
@@ -78,6 +87,8 @@ fn main() -> anyhow::Result<std::process::ExitCode> {
         Command::Replay(args) => replay_cmd::run(args)?,
         // Exit status 1 when `--fail-above` is exceeded.
         Command::Diff(args) => return diff_cmd::run(&args),
+        Command::Job(args) => return job_cmd::run(&args),
+        Command::Aggregate(args) => return aggregate_cmd::run(&args),
     }
     Ok(std::process::ExitCode::SUCCESS)
 }
