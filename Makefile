@@ -42,6 +42,7 @@ lint: setup
 	cargo clippy --workspace --all-targets -- -D warnings
 	$(PY) -m ruff check training bench scripts
 	$(PY) -m ruff format --check training bench scripts
+	deploy/check.sh
 
 ## Criterion benchmarks (hot paths).
 bench:

@@ -78,8 +78,8 @@ pub struct JobArgs {
     /// ONNX Runtime threads per model (default: ONNX Runtime's, one per core).
     #[arg(long = "onnx-threads")]
     onnx_threads: Option<usize>,
-    /// A frame without cones after this long is counted lost.
-    #[arg(long = "frame-timeout-s", default_value_t = 10.0)]
+    /// A frame without cones after this long is counted lost (generous: workers share cores).
+    #[arg(long = "frame-timeout-s", default_value_t = 60.0)]
     frame_timeout_s: f64,
 }
 
@@ -261,7 +261,10 @@ async fn process(
     let mut zenoh = zenoh.clone();
     zenoh.namespace = format!("job-{}-{list_index}", std::process::id());
     let topics = Topics::from_args(&zenoh)?;
-    let common = CommonArgs::for_camera(zenoh.clone(), &camera);
+    let mut common = CommonArgs::for_camera(zenoh.clone(), &camera);
+    // Off line nothing goes stale: a frame that waited behind a slow stage on a loaded machine
+    // is processed, not refused as `stale_input` (the player sends the next one only after).
+    common.max_input_age_ms = 0;
     let shutdown = Shutdown::new();
     let mut tasks = Vec::new();
     let mut readiness = Vec::new();
