@@ -199,7 +199,7 @@ fn models_of(args: &JobArgs) -> anyhow::Result<BTreeMap<String, ModelDigest>> {
 
 enum Outcome {
     Skipped,
-    Done(JobSummary),
+    Done(Box<JobSummary>),
 }
 
 /// The camera of a recording (the services serve one camera), and a check that it reads.
@@ -410,7 +410,7 @@ async fn process(
         let mut json = serde_json::to_vec_pretty(&summary)?;
         json.push(b'\n');
         write_atomic(&paths.summary, &json)?;
-        Ok(Outcome::Done(summary))
+        Ok(Outcome::Done(Box::new(summary)))
     }
     .await;
     shutdown.trigger();

@@ -144,7 +144,13 @@ fn two_shards_process_every_recording_once_and_aggregate() {
         assert_eq!(summary["frames"].as_u64().unwrap(), 12, "{summary}");
         assert_eq!(summary["frames_lost"].as_u64().unwrap(), 0, "{summary}");
         assert!(summary["cones"].as_u64().unwrap() > 0, "{summary}");
-        assert_eq!(summary["models"]["detector"]["sha256"].as_str().unwrap().len(), 64);
+        assert_eq!(
+            summary["models"]["detector"]["sha256"]
+                .as_str()
+                .unwrap()
+                .len(),
+            64
+        );
         assert!(out.join(summary["results"].as_str().unwrap()).is_file());
     }
     // Same drive three times: the same cones each time.
@@ -163,10 +169,22 @@ fn two_shards_process_every_recording_once_and_aggregate() {
     let stdout = String::from_utf8_lossy(&again.stdout);
     assert_eq!(stdout.matches("skipped").count(), 3, "{stdout}");
     let forced = conesight(&[
-        "job", "--recordings", rec, "--out", out_s, "--shard-slot", "1", "--shard-count", "2",
+        "job",
+        "--recordings",
+        rec,
+        "--out",
+        out_s,
+        "--shard-slot",
+        "1",
+        "--shard-count",
+        "2",
         "--force",
     ]);
-    assert!(forced.status.success(), "{}", String::from_utf8_lossy(&forced.stderr));
+    assert!(
+        forced.status.success(),
+        "{}",
+        String::from_utf8_lossy(&forced.stderr)
+    );
     let after = summaries(&out);
     assert_eq!(after.len(), 3);
     for (a, b) in first.iter().zip(&after) {
@@ -175,7 +193,11 @@ fn two_shards_process_every_recording_once_and_aggregate() {
 
     // Aggregate, and against a copy of itself as the baseline.
     let report = conesight(&["aggregate", out_s, "--expect", "3", "--json"]);
-    assert!(report.status.success(), "{}", String::from_utf8_lossy(&report.stderr));
+    assert!(
+        report.status.success(),
+        "{}",
+        String::from_utf8_lossy(&report.stderr)
+    );
     let report: Value = serde_json::from_slice(&report.stdout).unwrap();
     assert_eq!(report["totals"]["drives"], 3);
     assert_eq!(report["totals"]["frames"], 36);
@@ -187,7 +209,11 @@ fn two_shards_process_every_recording_once_and_aggregate() {
         std::fs::copy(&path, baseline.join(path.file_name().unwrap())).unwrap();
     }
     let compared = conesight(&[
-        "aggregate", out_s, "--baseline", baseline.to_str().unwrap(), "--json",
+        "aggregate",
+        out_s,
+        "--baseline",
+        baseline.to_str().unwrap(),
+        "--json",
     ]);
     assert!(compared.status.success());
     let compared: Value = serde_json::from_slice(&compared.stdout).unwrap();
@@ -202,18 +228,46 @@ fn two_shards_process_every_recording_once_and_aggregate() {
     assert!(!missing.status.success());
     assert!(stderr(&missing).contains("no recording at /nonexistent/x.mcap"));
     let index = conesight(&[
-        "job", "--recordings", rec, "--out", out_s, "--shard-index", "2", "--shard-count", "2",
+        "job",
+        "--recordings",
+        rec,
+        "--out",
+        out_s,
+        "--shard-index",
+        "2",
+        "--shard-count",
+        "2",
     ]);
     assert!(!index.status.success());
-    assert!(stderr(&index).contains("not below the shard count 2"), "{}", stderr(&index));
-    let slot = conesight(&["job", "--recordings", rec, "--out", out_s, "--shard-slot", "0"]);
+    assert!(
+        stderr(&index).contains("not below the shard count 2"),
+        "{}",
+        stderr(&index)
+    );
+    let slot = conesight(&[
+        "job",
+        "--recordings",
+        rec,
+        "--out",
+        out_s,
+        "--shard-slot",
+        "0",
+    ]);
     assert!(!slot.status.success());
     assert!(stderr(&slot).contains("1-based"), "{}", stderr(&slot));
     let not_mcap = dir.join("notes.mcap");
     std::fs::write(&not_mcap, b"not an mcap").unwrap();
     let bad = conesight(&[
-        "job", "--recordings", not_mcap.to_str().unwrap(), "--out", dir.join("bad").to_str().unwrap(),
+        "job",
+        "--recordings",
+        not_mcap.to_str().unwrap(),
+        "--out",
+        dir.join("bad").to_str().unwrap(),
     ]);
     assert!(!bad.status.success());
-    assert!(stderr(&bad).contains("is not an MCAP file"), "{}", stderr(&bad));
+    assert!(
+        stderr(&bad).contains("is not an MCAP file"),
+        "{}",
+        stderr(&bad)
+    );
 }
