@@ -87,7 +87,9 @@ fi
 # The camera service and the CLI link GStreamer (camera sources `gst:` and `video:`): its
 # libraries and the base and good plugins (v4l2src, videoconvert, decodebin, jpegdec, ...) at
 # run time; the -dev packages stay on the build host (scripts/setup.sh).
-runtime_packages="libgstreamer1.0-0,libgstreamer-plugins-base1.0-0,gstreamer1.0-plugins-base,gstreamer1.0-plugins-good"
+# dbus-x11: a dbus-session-bus for dconf-service (pulled in by gstreamer1.0-plugins-good through
+# libsoup and glib-networking); without it debootstrap failed configuring dconf-service.
+runtime_packages="libgstreamer1.0-0,libgstreamer-plugins-base1.0-0,gstreamer1.0-plugins-base,gstreamer1.0-plugins-good,dbus-x11"
 
 echo "build-base.sh: debootstrap $release ($arch, minbase) into $rootfs"
 "${SUDO[@]}" debootstrap --variant=minbase --arch="$arch" "${foreign[@]}" \

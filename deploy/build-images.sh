@@ -5,6 +5,7 @@
 #   deploy/build-images.sh --no-cargo       # reuse target/release binaries as they are
 #   deploy/build-images.sh camera localiser # only these targets (camera detector keypoints localiser cli prometheus)
 #   deploy/build-images.sh --release bookworm  # base release on a non-Debian host (default: the host's)
+#   CONESIGHT_BIN_DIR=target/debug deploy/build-images.sh --no-cargo cli  # image debug binaries (tests)
 #
 # Images: conesight/<target>:latest and conesight/<target>:<git short rev>. The build context is
 # staged in build/images/context/ (git-ignored) so Docker never sees target/ or the venv.
@@ -34,6 +35,7 @@ declare -A HOST_PROGRAM=(
     [prometheus]=/usr/bin/prometheus
 )
 ORT_LIB="build/onnxruntime/libonnxruntime.so.1.31.1"
+BIN_DIR="${CONESIGHT_BIN_DIR:-target/release}"
 
 run_cargo=1
 release=""
@@ -86,7 +88,7 @@ ctx="build/images/context"
 rm -rf "$ctx"
 mkdir -p "$ctx/bin" "$ctx/onnxruntime" "$ctx/models" "$ctx/zenoh"
 for t in "${ALL_TARGETS[@]}"; do
-    bin="target/release/${BINARY[$t]}"
+    bin="$BIN_DIR/${BINARY[$t]}"
     if [[ ! -x "$bin" ]]; then
         echo "build-images.sh: $bin missing (cargo build --release -p ${PACKAGE[$t]})" >&2
         exit 1

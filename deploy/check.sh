@@ -4,6 +4,11 @@
 #     docker-compose 1.x); skipped when neither is installed;
 #   - every image a compose file names is a target of deploy/Dockerfile, and every Dockerfile
 #     service target is built by build-images.sh;
+#   - the Kubernetes manifests (deploy/k8s/) pass a schema check offline (kubernetes-validate
+#     --strict, from scripts/requirements.txt; no cluster), and the Indexed Job's shard count
+#     matches its completions;
+#   - the swarm stack file (deploy/stack.replay.yml) passes `docker stack config` when the
+#     Docker CLI has it (20.10 has not: then a YAML parse);
 #   - the scripts are shellcheck-clean (when shellcheck is installed).
 # Exit code 0 when all checks that could run passed.
 set -euo pipefail
@@ -100,6 +105,55 @@ if python3 -m json.tool deploy/grafana/conesight-dashboard.json >/dev/null; then
     ok "deploy/grafana/conesight-dashboard.json is JSON"
 else
     fail "deploy/grafana/conesight-dashboard.json is not JSON"
+# --- Kubernetes manifests and the swarm stack --------------------------------------------------
+py="$ROOT/build/venv/bin/python"
+[[ -x "$py" ]] || py=python3
+kv="$ROOT/build/venv/bin/kubernetes-validate"
+[[ -x "$kv" ]] || kv="$(command -v kubernetes-validate || true)"
+# The oldest Kubernetes with everything the Job uses (backoffLimitPerIndex: beta in 1.29) and
+# the newest the validator knows.
+for version in 1.29.0 1.37.0; do
+    if [[ -z "$kv" ]]; then
+        skip "kubernetes-validate (not installed: scripts/setup.sh all installs it)"
+        break
+    elif "$kv" --strict --quiet -k "$version" deploy/k8s/*.yaml; then
+        ok "kubernetes-validate --strict -k $version deploy/k8s/*.yaml"
+    else
+        fail "kubernetes-validate --strict -k $version deploy/k8s/*.yaml"
+    fi
+done
+if "$py" - deploy/k8s/replay-job.yaml <<'EOF'
+import sys
+import yaml
+docs = [d for d in yaml.safe_load_all(open(sys.argv[1])) if d]
+job = next(d for d in docs if d["kind"] == "Job")
+spec = job["spec"]
+claims = {d["metadata"]["name"] for d in docs if d["kind"] == "PersistentVolumeClaim"}
+pod = spec["template"]["spec"]
+args = pod["containers"][0]["args"]
+assert spec["completionMode"] == "Indexed", "completionMode must be Indexed"
+count = int(args[args.index("--shard-count") + 1])
+assert count == spec["completions"], f"--shard-count {count} != completions {spec['completions']}"
+assert "--shard-index" not in args, "the index comes from JOB_COMPLETION_INDEX"
+assert pod["restartPolicy"] == "Never", "restartPolicy Never (retries per index)"
+volumes = {v["persistentVolumeClaim"]["claimName"] for v in pod["volumes"] if "persistentVolumeClaim" in v}
+assert volumes <= claims, f"claims {volumes - claims} not in the file"
+EOF
+then
+    ok "deploy/k8s/replay-job.yaml: Indexed, --shard-count = completions, PVC declared"
+else
+    fail "deploy/k8s/replay-job.yaml: Indexed Job consistency"
+fi
+if command -v docker >/dev/null && docker stack config --help >/dev/null 2>&1; then
+    if CONESIGHT_JOB_DATA=/srv/conesight docker stack config -c deploy/stack.replay.yml >/dev/null; then
+        ok "docker stack config: deploy/stack.replay.yml"
+    else
+        fail "docker stack config: deploy/stack.replay.yml"
+    fi
+elif "$py" -c 'import sys, yaml; d = yaml.safe_load(open(sys.argv[1])); r = d["services"]["replay"]; assert r["deploy"]["restart_policy"]["condition"] == "on-failure"; assert "{{.Task.Slot}}" in r["environment"]["CONESIGHT_SHARD_SLOT"]' deploy/stack.replay.yml; then
+    ok "deploy/stack.replay.yml parses (restart on-failure, task slot as shard; no docker stack config here)"
+else
+    fail "deploy/stack.replay.yml"
 fi
 
 # --- scripts ----------------------------------------------------------------------------------

@@ -13,15 +13,19 @@
 //! - `status`: the live services of a namespace with their health ([`status_cmd`]).
 //! - `echo`: a stream's messages as JSON lines ([`echo_cmd`]).
 //! - `dashboard`: the web page of a run: cone map, annotated frame, services ([`dashboard`]).
+//! - `job`, `aggregate`: replay jobs at scale, one shard of a recording list per worker, and
+//!   the merge of their results ([`job_cmd`], [`aggregate_cmd`]).
 //! - `eval`: the paper's experiments on the held-out synthetic set ([`conesight_eval::cli`]);
 //!   `make eval` runs the same through the `conesight-eval` binary and writes the report.
 
+mod aggregate_cmd;
 mod bev;
 mod dashboard;
 mod demo;
 mod demo_frame;
 mod diff_cmd;
 mod echo_cmd;
+mod job_cmd;
 mod keypoints_cmd;
 mod predict;
 mod record_cmd;
@@ -74,6 +78,11 @@ enum Command {
     /// A web page of a run: live bird's-eye map of the cones, the annotated frame, rates,
     /// latency and the services' health (http://127.0.0.1:8080/ by default).
     Dashboard(dashboard::DashboardArgs),
+    /// One worker of a replay job: its shard of a recording list through the pipeline in this
+    /// process, a results MCAP and a summary JSON per recording (swarm, Kubernetes Indexed Job).
+    Job(job_cmd::JobArgs),
+    /// Merge the summaries of a job's results folder; `--baseline` compares two model versions.
+    Aggregate(aggregate_cmd::AggregateArgs),
 }
 
 /// The git revision the binary was built from (`build.rs`; `unknown` outside a checkout).
@@ -96,6 +105,8 @@ fn main() -> anyhow::Result<std::process::ExitCode> {
         Command::Status(args) => return status_cmd::run(&args),
         Command::Echo(args) => echo_cmd::run(&args)?,
         Command::Dashboard(args) => dashboard::run(&args)?,
+        Command::Job(args) => return job_cmd::run(&args),
+        Command::Aggregate(args) => return aggregate_cmd::run(&args),
     }
     Ok(std::process::ExitCode::SUCCESS)
 }

@@ -13,12 +13,17 @@
 //!   namespace, at the recorded timing scaled by a rate or as fast as the pipeline answers
 //!   (one frame at a time, paced on its cones, so no frame is replaced in a service's slot).
 //! - `diff`: [`diff`], cones of two runs matched per frame and per cone, by range band.
+//! - `job`: replay jobs at scale: the sorted recording list split by [`Shard`] (recording `i`
+//!   to shard `i mod count`), results filed per drive and renamed into place
+//!   ([`ResultPaths`], [`write_atomic`]), [`JobSummary`], and the merge of a results folder
+//!   ([`totals`], [`compare_folders`] against a baseline folder).
 //!
 //! Entry points: `Player::new(&session, &topics, options)`, `prepare(&paths)`, `play(..)`;
 //! `diff(&a, &b, &DiffParams::default())`.
 
 mod diff;
 mod error;
+pub mod job;
 mod player;
 mod reader;
 
@@ -27,5 +32,9 @@ pub use diff::{
     compare, describe, diff, match_frame, percentile, read_cones,
 };
 pub use error::ReplayError;
+pub use job::{
+    JobSummary, ModelDigest, ResultPaths, Shard, compare_folders, list_recordings, read_summaries,
+    totals, write_atomic,
+};
 pub use player::{Pacing, Player, ReplayOptions, ReplayProgress, ReplaySummary};
 pub use reader::{McapFile, RecordedMessage, Recording, decode_message, stream_of_schema};
