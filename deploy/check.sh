@@ -105,6 +105,8 @@ if python3 -m json.tool deploy/grafana/conesight-dashboard.json >/dev/null; then
     ok "deploy/grafana/conesight-dashboard.json is JSON"
 else
     fail "deploy/grafana/conesight-dashboard.json is not JSON"
+fi
+
 # --- Kubernetes manifests and the swarm stack --------------------------------------------------
 py="$ROOT/build/venv/bin/python"
 [[ -x "$py" ]] || py=python3
