@@ -12,6 +12,7 @@
 //! - `diff`: the cones of two recordings compared by range band ([`diff_cmd`]).
 //! - `status`: the live services of a namespace with their health ([`status_cmd`]).
 //! - `echo`: a stream's messages as JSON lines ([`echo_cmd`]).
+//! - `foxglove`: a live view for the Foxglove app ([`foxglove_view`]).
 //! - `dashboard`: the web page of a run: cone map, annotated frame, services ([`dashboard`]).
 //! - `eval`: the paper's experiments on the held-out synthetic set ([`conesight_eval::cli`]);
 //!   `make eval` runs the same through the `conesight-eval` binary and writes the report.
@@ -22,6 +23,7 @@ mod demo;
 mod demo_frame;
 mod diff_cmd;
 mod echo_cmd;
+mod foxglove_view;
 mod keypoints_cmd;
 mod predict;
 mod record_cmd;
@@ -74,6 +76,9 @@ enum Command {
     /// A web page of a run: live bird's-eye map of the cones, the annotated frame, rates,
     /// latency and the services' health (http://127.0.0.1:8080/ by default).
     Dashboard(dashboard::DashboardArgs),
+    /// A live view for the Foxglove app: image, calibration, 3D scene of the cones with their
+    /// covariance and the camera frustum, raw cones (ws://127.0.0.1:8765 by default).
+    Foxglove(foxglove_view::FoxgloveArgs),
 }
 
 /// The git revision the binary was built from (`build.rs`; `unknown` outside a checkout).
@@ -96,6 +101,7 @@ fn main() -> anyhow::Result<std::process::ExitCode> {
         Command::Status(args) => return status_cmd::run(&args),
         Command::Echo(args) => echo_cmd::run(&args)?,
         Command::Dashboard(args) => dashboard::run(&args)?,
+        Command::Foxglove(args) => foxglove_view::run(&args)?,
     }
     Ok(std::process::ExitCode::SUCCESS)
 }
