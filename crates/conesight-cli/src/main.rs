@@ -12,6 +12,7 @@
 //! - `diff`: the cones of two recordings compared by range band ([`diff_cmd`]).
 //! - `status`: the live services of a namespace with their health ([`status_cmd`]).
 //! - `echo`: a stream's messages as JSON lines ([`echo_cmd`]).
+//! - `foxglove`: a live view for the Foxglove app ([`foxglove_view`]).
 //! - `dashboard`: the web page of a run: cone map, annotated frame, services ([`dashboard`]).
 //! - `job`, `aggregate`: replay jobs at scale, one shard of a recording list per worker, and
 //!   the merge of their results ([`job_cmd`], [`aggregate_cmd`]).
@@ -26,6 +27,7 @@ mod demo_frame;
 mod diff_cmd;
 mod echo_cmd;
 mod job_cmd;
+mod foxglove_view;
 mod keypoints_cmd;
 mod predict;
 mod record_cmd;
@@ -83,6 +85,9 @@ enum Command {
     Job(job_cmd::JobArgs),
     /// Merge the summaries of a job's results folder; `--baseline` compares two model versions.
     Aggregate(aggregate_cmd::AggregateArgs),
+    /// A live view for the Foxglove app: image, calibration, 3D scene of the cones with their
+    /// covariance and the camera frustum, raw cones (ws://127.0.0.1:8765 by default).
+    Foxglove(foxglove_view::FoxgloveArgs),
 }
 
 /// The git revision the binary was built from (`build.rs`; `unknown` outside a checkout).
@@ -107,6 +112,7 @@ fn main() -> anyhow::Result<std::process::ExitCode> {
         Command::Dashboard(args) => dashboard::run(&args)?,
         Command::Job(args) => return job_cmd::run(&args),
         Command::Aggregate(args) => return aggregate_cmd::run(&args),
+        Command::Foxglove(args) => foxglove_view::run(&args)?,
     }
     Ok(std::process::ExitCode::SUCCESS)
 }

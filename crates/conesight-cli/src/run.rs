@@ -129,6 +129,9 @@ pub struct RunArgs {
     /// Serve the web dashboard of this run here too (e.g. 127.0.0.1:8080).
     #[arg(long)]
     dashboard: Option<std::net::SocketAddr>,
+    /// Serve the Foxglove live view of this run here too (e.g. 127.0.0.1:8765).
+    #[arg(long)]
+    foxglove: Option<std::net::SocketAddr>,
     /// Output folder for the PNGs.
     #[arg(long, default_value = "out/run")]
     out: PathBuf,
@@ -218,6 +221,10 @@ async fn run_async(args: RunArgs) -> anyhow::Result<()> {
     if let Some(addr) = args.dashboard {
         let bound = crate::dashboard::serve(&session, &topics, addr, &shutdown).await?;
         println!("dashboard: http://{bound}/");
+    }
+    if let Some(addr) = args.foxglove {
+        let bound = crate::foxglove_view::serve(&session, &topics, addr, &shutdown).await?;
+        println!("foxglove: ws://{bound}");
     }
     let common = |name: ServiceName| {
         let mut common = CommonArgs::for_camera(args.zenoh.clone(), &args.camera);
