@@ -71,7 +71,7 @@ clean:
 
 ## Container images and the one-host compose stack (deploy/README.md). Not part of `make test`.
 DEPLOY_COMPOSE ?= $(shell docker compose version >/dev/null 2>&1 && echo "docker compose" || echo docker-compose)
-.PHONY: images compose-up compose-down deploy-check
+.PHONY: images compose-up compose-down deploy-check image-arm64 smoke-arm64
 
 images: setup-runtime
 	deploy/build-images.sh
@@ -85,6 +85,15 @@ compose-down:
 
 deploy-check:
 	deploy/check.sh
+
+## arm64 (Jetson) images from scratch: Debian's cross toolchain in a chroot, ONNX Runtime's
+## aarch64 wheel, a debootstrapped trixie arm64 base (deploy/arm64/). Needs root; not in CI.
+image-arm64: setup-runtime
+	deploy/build-images.sh --arch arm64
+
+## The arm64 `conesight` under qemu-user: --version and predict, cones compared with x86.
+smoke-arm64:
+	deploy/arm64/smoke.sh
 
 ## The paper's experiments on our pipeline (crates/conesight-eval + conesight_train.report):
 ## held-out synthetic frames (seeds 100-102) and real crops -> docs/results.md, docs/results.json,

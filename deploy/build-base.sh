@@ -5,7 +5,7 @@
 #
 #   deploy/build-base.sh                 # conesight/base:<host release>, skipped if it exists
 #   deploy/build-base.sh --force         # rebuild even if the image exists
-#   deploy/build-base.sh --arch arm64    # foreign arch (Jetson): needs qemu-user-static + binfmt; untested
+#   deploy/build-base.sh --arch arm64 --release trixie  # foreign arch (Jetson): qemu-user-static + binfmt; deploy/arm64/
 #   deploy/build-base.sh --release bookworm  # on a non-Debian host (Ubuntu, L4T)
 #
 # The service binaries are built on the host and linked against the host's glibc, so the base
@@ -80,7 +80,7 @@ mkdir -p "$work"
 foreign=()
 if [[ "$arch" != "$host_arch" ]]; then
     # debootstrap runs the second stage inside the chroot, which needs the target's binaries to
-    # execute here: qemu-user-static with binfmt_misc registered. Not tested on our machines.
+    # execute here: qemu-user-static with binfmt_misc registered (deploy/arm64/image.sh).
     foreign=(--foreign)
 fi
 

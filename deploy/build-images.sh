@@ -6,8 +6,10 @@
 #   deploy/build-images.sh camera localiser # only these targets (camera detector keypoints localiser cli prometheus)
 #   deploy/build-images.sh --release bookworm  # base release on a non-Debian host (default: the host's)
 #   CONESIGHT_BIN_DIR=target/debug deploy/build-images.sh --no-cargo cli  # image debug binaries (tests)
+#   deploy/build-images.sh --arch arm64     # Jetson images from deploy/arm64/ (make image-arm64)
 #
-# Images: conesight/<target>:latest and conesight/<target>:<git short rev>. The build context is
+# Images: conesight/<target>:latest and conesight/<target>:<git short rev> (arm64: :arm64 and
+# :<rev>-arm64, binaries cross-compiled by deploy/arm64/cross-build.sh on a trixie base). The build context is
 # staged in build/images/context/ (git-ignored) so Docker never sees target/ or the venv.
 set -euo pipefail
 
@@ -35,16 +37,17 @@ declare -A HOST_PROGRAM=(
     [prometheus]=/usr/bin/prometheus
 )
 ORT_LIB="build/onnxruntime/libonnxruntime.so.1.31.1"
-BIN_DIR="${CONESIGHT_BIN_DIR:-target/release}"
 
 run_cargo=1
 release=""
+arch=""
 targets=()
 while [[ $# -gt 0 ]]; do
     arg="$1"
     case "$arg" in
         --no-cargo) run_cargo=0 ;;
         --release) release="$2"; shift ;;
+        --arch) arch="$2"; shift ;;
         -h | --help) sed -n '2,10p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; exit 0 ;;
         -*) echo "build-images.sh: unknown option $arg" >&2; exit 2 ;;
         *)
@@ -67,8 +70,26 @@ if [[ -z "$release" ]]; then
     echo "build-images.sh: the host is not Debian; pass --release (e.g. --release bookworm)" >&2
     exit 2
 fi
+bin_dir="${CONESIGHT_BIN_DIR:-target/release}"
+tag_suffix=""
+tag_latest=latest
+platform=()
 base="conesight/base:${release}"
-deploy/build-base.sh --release "$release"
+if [[ -n "$arch" && "$arch" != "$(dpkg --print-architecture)" ]]; then
+    [[ "$arch" == arm64 ]] || { echo "build-images.sh: --arch arm64 is the only foreign one" >&2; exit 2; }
+    # The cross toolchain links trixie's arm64 glibc, so the base is trixie whatever the host.
+    release="${CONESIGHT_ARM64_RELEASE:-trixie}"
+    base="conesight/base:${release}-arm64"
+    bin_dir="target/aarch64-cross/aarch64-unknown-linux-gnu/release"
+    ORT_LIB="build/arm64/onnxruntime/libonnxruntime.so.1.31.1"
+    tag_suffix="-arm64"
+    tag_latest=arm64
+    platform=(--platform linux/arm64)
+    deploy/arm64/onnxruntime.sh
+    deploy/build-base.sh --release "$release" --arch arm64
+else
+    deploy/build-base.sh --release "$release"
+fi
 
 if [[ ! -f "$ORT_LIB" ]]; then
     echo "build-images.sh: $ORT_LIB missing; run 'make setup' first" >&2
@@ -80,15 +101,19 @@ fi
 if [[ $run_cargo -eq 1 ]]; then
     pkgs=()
     for t in "${ALL_TARGETS[@]}"; do pkgs+=(-p "${PACKAGE[$t]}"); done
-    echo "build-images.sh: cargo build --release ${pkgs[*]}"
-    cargo build --release "${pkgs[@]}"
+    if [[ -n "$tag_suffix" ]]; then
+        deploy/arm64/cross-build.sh "${pkgs[@]}"
+    else
+        echo "build-images.sh: cargo build --release ${pkgs[*]}"
+        cargo build --release "${pkgs[@]}"
+    fi
 fi
 
-ctx="build/images/context"
+ctx="build/images/context${tag_suffix}"
 rm -rf "$ctx"
 mkdir -p "$ctx/bin" "$ctx/onnxruntime" "$ctx/models" "$ctx/zenoh"
 for t in "${ALL_TARGETS[@]}"; do
-    bin="$BIN_DIR/${BINARY[$t]}"
+    bin="$bin_dir/${BINARY[$t]}"
     if [[ ! -x "$bin" ]]; then
         echo "build-images.sh: $bin missing (cargo build --release -p ${PACKAGE[$t]})" >&2
         exit 1
@@ -127,15 +152,15 @@ fi
 rev="$(git rev-parse --short HEAD 2>/dev/null || echo unknown)"
 for t in "${targets[@]}"; do
     echo "build-images.sh: conesight/$t"
-    docker build --quiet \
+    docker build --quiet "${platform[@]}" \
         --file deploy/Dockerfile \
         --build-arg "BASE=$base" \
         --target "$t" \
         --label "org.opencontainers.image.revision=$rev" \
         --label "org.opencontainers.image.source=conesight" \
-        --tag "conesight/$t:latest" \
-        --tag "conesight/$t:$rev" \
+        --tag "conesight/$t:$tag_latest" \
+        --tag "conesight/$t:$rev$tag_suffix" \
         "$ctx"
 done
 
-docker image ls --format 'table {{.Repository}}:{{.Tag}}\t{{.Size}}' 'conesight/*:latest'
+docker image ls --format 'table {{.Repository}}:{{.Tag}}\t{{.Size}}' "conesight/*:$tag_latest"

@@ -160,7 +160,7 @@ fi
 
 # --- scripts ----------------------------------------------------------------------------------
 if command -v shellcheck >/dev/null; then
-    if shellcheck deploy/*.sh deploy/zenoh/*.sh; then ok "shellcheck deploy/*.sh deploy/zenoh/*.sh"; else fail "shellcheck deploy/*.sh deploy/zenoh/*.sh"; fi
+    if shellcheck deploy/*.sh deploy/zenoh/*.sh deploy/arm64/*.sh; then ok "shellcheck deploy/*.sh deploy/zenoh/*.sh deploy/arm64/*.sh"; else fail "shellcheck deploy/*.sh deploy/zenoh/*.sh deploy/arm64/*.sh"; fi
 else
     skip "shellcheck (not installed)"
 fi

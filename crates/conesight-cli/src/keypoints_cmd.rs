@@ -24,6 +24,13 @@ pub struct KeypointsArgs {
     /// ONNX Runtime library (default: the checkout's build/onnxruntime, or ORT_DYLIB_PATH).
     #[arg(long = "onnxruntime")]
     onnxruntime: Option<PathBuf>,
+    /// Where the model runs: cpu, cuda or tensorrt.
+    #[arg(
+        long = "execution-provider",
+        env = "CONESIGHT_EXECUTION_PROVIDER",
+        default_value_t
+    )]
+    execution_provider: conesight_onnx::ExecutionProvider,
     /// Cone crops: the whole image is taken as the cone's box (PNG, JPEG, ...).
     #[arg(required = true)]
     images: Vec<PathBuf>,
@@ -36,6 +43,7 @@ pub fn run(args: &KeypointsArgs) -> anyhow::Result<()> {
         library: args.onnxruntime.clone(),
         intra_threads: None,
         allow_spinning: None,
+        execution_provider: args.execution_provider,
     };
     let mut stage = KeypointStage::load(&path, &onnx)?;
     let stdout = std::io::stdout();

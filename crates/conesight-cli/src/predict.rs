@@ -56,6 +56,13 @@ pub struct PredictArgs {
     /// ONNX Runtime threads per model.
     #[arg(long = "onnx-threads")]
     onnx_threads: Option<usize>,
+    /// Where the models run: cpu, cuda or tensorrt (an ONNX Runtime built with it).
+    #[arg(
+        long = "execution-provider",
+        env = "CONESIGHT_EXECUTION_PROVIDER",
+        default_value_t
+    )]
+    execution_provider: conesight_onnx::ExecutionProvider,
     /// Constrain cone bases to the road plane of the extrinsics.
     #[arg(long = "ground-plane")]
     ground_plane: bool,
@@ -91,6 +98,7 @@ pub fn run(args: &PredictArgs) -> anyhow::Result<()> {
             library: args.onnxruntime.clone(),
             intra_threads: args.onnx_threads,
             allow_spinning: None,
+            execution_provider: args.execution_provider,
         },
         on_ground_plane: args.ground_plane,
         ego_mask: args.ego_mask.as_deref().map(EgoMask::parse).transpose()?,

@@ -116,6 +116,13 @@ pub struct RunArgs {
     /// ONNX Runtime threads per model.
     #[arg(long = "onnx-threads")]
     onnx_threads: Option<usize>,
+    /// Where the detector and keypoint models run: cpu, cuda or tensorrt.
+    #[arg(
+        long = "execution-provider",
+        env = "CONESIGHT_EXECUTION_PROVIDER",
+        default_value_t
+    )]
+    execution_provider: conesight_onnx::ExecutionProvider,
     /// Whether ONNX Runtime's idle threads busy-wait between calls (default: ONNX Runtime's).
     #[arg(long = "onnx-spinning")]
     onnx_spinning: Option<bool>,
@@ -228,6 +235,7 @@ async fn run_async(args: RunArgs) -> anyhow::Result<()> {
     }
     let common = |name: ServiceName| {
         let mut common = CommonArgs::for_camera(args.zenoh.clone(), &args.camera);
+        common.execution_provider = args.execution_provider;
         if let Some(base) = args.http_base_port {
             common.http.addr.set_port(base.saturating_add(name as u16));
         }

@@ -167,6 +167,7 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Meta> {
         library: None,
         intra_threads: config.threads,
         allow_spinning: None,
+        execution_provider: Default::default(),
     };
     let params = FrameParams::default();
     let camera = params.camera;

@@ -29,6 +29,23 @@ pub enum OnnxError {
         /// How to install a working one.
         hint: &'static str,
     },
+    /// The execution provider asked for is not in the loaded ONNX Runtime build.
+    #[error(
+        "execution provider `{provider}` ({ort_name}) asked for by {flag} is not in the \
+ONNX Runtime library loaded from {library}; {hint}"
+    )]
+    ProviderUnavailable {
+        /// The flag's value (`cuda`, `tensorrt`).
+        provider: &'static str,
+        /// ONNX Runtime's name of it.
+        ort_name: &'static str,
+        /// The library path.
+        library: String,
+        /// The flag and variable that chose it.
+        flag: &'static str,
+        /// Which build to install.
+        hint: &'static str,
+    },
     /// The model file does not exist.
     #[error("model file {path} not found; {hint}")]
     ModelNotFound {

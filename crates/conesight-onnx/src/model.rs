@@ -7,6 +7,7 @@ use ort::session::builder::GraphOptimizationLevel;
 use ort::value::Tensor;
 
 use crate::error::OnnxError;
+use crate::provider::ExecutionProvider;
 use crate::runtime::environment;
 
 /// How to open a model.
@@ -20,6 +21,8 @@ pub struct ModelOptions {
     /// Runtime's default (spinning). Services sharing two cores turn it off, so one model's
     /// idle threads do not steal the core another process is computing on.
     pub allow_spinning: Option<bool>,
+    /// Where the models run (`--execution-provider`); CPU by default.
+    pub execution_provider: ExecutionProvider,
 }
 
 /// A dense `f32` tensor: shape and row-major data.
@@ -75,6 +78,19 @@ impl OnnxModel {
                 .map_err(|e| load_error(e.into()))?
                 .with_inter_op_spinning(spinning)
                 .map_err(|e| load_error(e.into()))?;
+        }
+        if options.execution_provider != ExecutionProvider::Cpu {
+            options.execution_provider.check_available()?;
+            builder = builder
+                .with_execution_providers(options.execution_provider.dispatch())
+                .map_err(|e| OnnxError::ModelLoad {
+                    path: path.to_path_buf(),
+                    message: format!(
+                        "execution provider `{}` is in the library but failed to start \
+                         (its CUDA/TensorRT libraries?): {e}",
+                        options.execution_provider
+                    ),
+                })?;
         }
         let session = builder.commit_from_file(path).map_err(load_error)?;
         let name = path

@@ -51,6 +51,14 @@ pub struct CommonArgs {
     /// the check off.
     #[arg(long = "max-input-age-ms", env = "CONESIGHT_MAX_INPUT_AGE_MS", default_value_t = DEFAULT_MAX_INPUT_AGE_MS)]
     pub max_input_age_ms: u64,
+    /// Where the models run: cpu, cuda or tensorrt (needs an ONNX Runtime built with it;
+    /// refused with the build to install when the loaded library lacks it).
+    #[arg(
+        long = "execution-provider",
+        env = "CONESIGHT_EXECUTION_PROVIDER",
+        default_value_t
+    )]
+    pub execution_provider: conesight_onnx::ExecutionProvider,
 }
 
 /// How far over `--max-message-mb` Zenoh still delivers a message: room for Zenoh's own framing
@@ -71,6 +79,7 @@ impl CommonArgs {
             camera: camera.to_owned(),
             max_message_mb: DEFAULT_MAX_MESSAGE_MB,
             max_input_age_ms: DEFAULT_MAX_INPUT_AGE_MS,
+            execution_provider: conesight_onnx::ExecutionProvider::Cpu,
         }
     }
 

@@ -68,6 +68,7 @@ pub async fn run(args: &DetectorArgs, node: Node, shutdown: Shutdown) -> anyhow:
     let onnx = ModelOptions {
         intra_threads: args.onnx_threads,
         allow_spinning: args.onnx_spinning,
+        execution_provider: args.common.execution_provider,
         ..ModelOptions::default()
     };
     let ego_mask = args.ego_mask.as_deref().map(EgoMask::parse).transpose()?;

@@ -88,6 +88,7 @@ pub async fn run(args: &KeypointsArgs, node: Node, shutdown: Shutdown) -> anyhow
     let onnx = ModelOptions {
         intra_threads: args.onnx_threads,
         allow_spinning: args.onnx_spinning,
+        execution_provider: args.common.execution_provider,
         ..ModelOptions::default()
     };
     let max_cones = args.max_cones;

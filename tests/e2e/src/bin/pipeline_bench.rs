@@ -197,6 +197,7 @@ async fn main() -> anyhow::Result<()> {
             library: None,
             intra_threads: threads,
             allow_spinning: spinning,
+            ..conesight_onnx::ModelOptions::default()
         },
         ..PipelineConfig::default()
     };

@@ -1,0 +1,56 @@
+#!/usr/bin/env bash
+# The arm64 image's `conesight` under qemu-user, against the x86 binary on the same image:
+# `--version`, then `predict` on docs/sample/frame.jpg, and the cones compared (same count and
+# classes, positions within 1e-3 of the range; compare.py prints the largest differences).
+#
+#   deploy/arm64/smoke.sh              # in the conesight/cli:arm64 container (docker + binfmt)
+#   deploy/arm64/smoke.sh --no-docker  # the cross-built binary on the arm64 rootfs (qemu -L)
+# x86 side: $CONESIGHT_X86_BIN, else target/release/conesight, else target/debug/conesight.
+# Outputs in build/arm64/smoke/. Needs qemu-user-static (binfmt registered for docker).
+set -euo pipefail
+
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
+cd "$ROOT"
+use_docker=1
+[[ "${1:-}" == "--no-docker" ]] && use_docker=0
+out="build/arm64/smoke"
+mkdir -p "$out"
+image="docs/sample/frame.jpg"
+camera="docs/sample/camera.yaml"
+
+x86="${CONESIGHT_X86_BIN:-}"
+if [[ -z "$x86" ]]; then
+    for candidate in target/release/conesight target/debug/conesight; do
+        [[ -x "$candidate" ]] && { x86="$candidate"; break; }
+    done
+fi
+if [[ -z "$x86" ]]; then
+    cargo build --release -p conesight-cli
+    x86=target/release/conesight
+fi
+
+if [[ $use_docker -eq 1 ]]; then
+    arm=(docker run --rm --platform linux/arm64 -v "$ROOT/docs/sample:/sample:ro"
+        --entrypoint /opt/conesight/bin/conesight conesight/cli:arm64)
+    arm_image="/sample/frame.jpg"
+    arm_camera="/sample/camera.yaml"
+else
+    rootfs="build/base/${CONESIGHT_ARM64_RELEASE:-trixie}-arm64/rootfs"
+    arm=(env ORT_DYLIB_PATH="$ROOT/build/arm64/onnxruntime/libonnxruntime.so.1.31.1"
+        qemu-aarch64-static -L "$rootfs"
+        target/aarch64-cross/aarch64-unknown-linux-gnu/release/conesight)
+    arm_image="$image"
+    arm_camera="$camera"
+fi
+
+echo "smoke.sh: arm64 --version: $("${arm[@]}" --version)"
+[[ $use_docker -eq 0 ]] && echo "smoke.sh: $(file -L "${arm[-1]}")"
+
+start=$(date +%s%N)
+"${arm[@]}" predict --camera "$arm_camera" "$arm_image" >"$out/arm64.jsonl"
+arm_ms=$((($(date +%s%N) - start) / 1000000))
+start=$(date +%s%N)
+"$x86" predict --camera "$camera" "$image" >"$out/x86.jsonl"
+x86_ms=$((($(date +%s%N) - start) / 1000000))
+echo "smoke.sh: predict took ${arm_ms} ms under qemu (arm64), ${x86_ms} ms native ($x86)"
+python3 deploy/arm64/compare.py "$out/x86.jsonl" "$out/arm64.jsonl"
