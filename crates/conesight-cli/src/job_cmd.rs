@@ -270,6 +270,7 @@ async fn process(
     let mut readiness = Vec::new();
     let detector = Node::new(
         "detector",
+        &camera,
         session.clone(),
         topics.clone(),
         Some(MAX_INPUT_AGE),
@@ -284,6 +285,7 @@ async fn process(
     }));
     let keypoints = Node::new(
         "keypoints",
+        &camera,
         session.clone(),
         topics.clone(),
         Some(MAX_INPUT_AGE),
@@ -298,6 +300,7 @@ async fn process(
     }));
     let localiser = Node::new(
         "localiser",
+        &camera,
         session.clone(),
         topics.clone(),
         Some(MAX_INPUT_AGE),
