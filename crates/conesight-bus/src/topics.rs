@@ -216,15 +216,20 @@ impl Topics {
         ))
     }
 
-    /// The service name and session id of a service token key of this run and vehicle.
-    pub fn parse_service<'k>(&self, key: &'k str) -> Option<(&'k str, &'k str)> {
-        let rest = key
-            .strip_prefix(ROOT)?
+    /// What follows `conesight/<namespace>/<vehicle>/` in `key`.
+    fn strip_vehicle<'k>(&self, key: &'k str) -> Option<&'k str> {
+        key.strip_prefix(ROOT)?
             .strip_prefix('/')?
             .strip_prefix(self.namespace.as_str())?
             .strip_prefix('/')?
             .strip_prefix(self.vehicle.as_str())?
-            .strip_prefix('/')?
+            .strip_prefix('/')
+    }
+
+    /// The service name and session id of a service token key of this run and vehicle.
+    pub fn parse_service<'k>(&self, key: &'k str) -> Option<(&'k str, &'k str)> {
+        let rest = self
+            .strip_vehicle(key)?
             .strip_prefix(SERVICE_CHUNK)?
             .strip_prefix('/')?;
         let (service, zid) = rest.split_once('/')?;
@@ -233,13 +238,7 @@ impl Topics {
 
     /// The camera and stream of a key of this run and vehicle; `None` for any other key.
     pub fn parse<'k>(&self, key: &'k str) -> Option<(&'k str, Stream)> {
-        let rest = key
-            .strip_prefix(ROOT)?
-            .strip_prefix('/')?
-            .strip_prefix(self.namespace.as_str())?
-            .strip_prefix('/')?
-            .strip_prefix(self.vehicle.as_str())?
-            .strip_prefix('/')?;
+        let rest = self.strip_vehicle(key)?;
         let (camera, stream) = rest.split_once('/')?;
         let stream = Stream::ALL.into_iter().find(|s| s.as_str() == stream)?;
         is_valid_chunk(camera).then_some((camera, stream))

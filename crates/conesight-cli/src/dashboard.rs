@@ -22,7 +22,7 @@ use axum::response::IntoResponse;
 use axum::routing::get;
 use conesight_bus::zenoh::Session;
 use conesight_bus::zenoh::bytes::ZBytes;
-use conesight_bus::{Stream, Topics, ZenohArgs, declare_subscriber, decode, open_session};
+use conesight_bus::{Stream, Topics, ZenohArgs, declare_subscriber, decode};
 use conesight_pipeline::Shutdown;
 use conesight_proto::pb;
 use image::{Rgb, RgbImage};
@@ -114,22 +114,14 @@ fn rate(times: &mut VecDeque<Instant>, now: Instant) -> f64 {
 
 /// Runs `conesight dashboard` until Ctrl-C.
 pub fn run(args: &DashboardArgs) -> anyhow::Result<()> {
-    conesight_service::init_tracing();
-    let runtime = tokio::runtime::Builder::new_multi_thread()
-        .enable_all()
-        .build()
-        .context("starting the async runtime")?;
-    runtime.block_on(async {
-        let shutdown = Shutdown::new();
-        shutdown.trigger_on_signal();
-        let session = open_session(&args.zenoh).await?;
-        let topics = Topics::from_args(&args.zenoh)?;
-        let bound = serve(&session, &topics, args.addr, &shutdown).await?;
-        eprintln!("dashboard: http://{bound}/ (Ctrl-C stops)");
-        shutdown.wait().await;
-        let _ = session.close().await;
-        Ok(())
-    })
+    crate::run_live_view(
+        &args.zenoh,
+        args.addr,
+        |session, topics, addr, shutdown| {
+            Box::pin(async move { serve(&session, &topics, addr, &shutdown).await })
+        },
+        |bound| eprintln!("dashboard: http://{bound}/ (Ctrl-C stops)"),
+    )
 }
 
 /// Subscribes to the run's cones and frames, follows its services, and serves the page on

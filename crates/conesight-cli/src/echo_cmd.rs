@@ -111,10 +111,7 @@ impl JsonLines {
 /// Runs `conesight echo`.
 pub fn run(args: &EchoArgs) -> anyhow::Result<()> {
     conesight_service::init_tracing();
-    let runtime = tokio::runtime::Builder::new_multi_thread()
-        .enable_all()
-        .build()
-        .context("starting the async runtime")?;
+    let runtime = crate::async_runtime()?;
     runtime.block_on(run_async(args))
 }
 

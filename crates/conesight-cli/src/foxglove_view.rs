@@ -25,7 +25,7 @@ use std::time::Instant;
 use anyhow::Context as _;
 use conesight_bus::zenoh::Session;
 use conesight_bus::zenoh::sample::Sample;
-use conesight_bus::{Stream, Topics, ZenohArgs, declare_subscriber, decode, open_session};
+use conesight_bus::{Stream, Topics, ZenohArgs, declare_subscriber, decode};
 use conesight_core::ConeClass;
 use conesight_pipeline::Shutdown;
 use conesight_proto::pb;
@@ -56,22 +56,18 @@ pub struct FoxgloveArgs {
 
 /// Runs `conesight foxglove` until Ctrl-C.
 pub fn run(args: &FoxgloveArgs) -> anyhow::Result<()> {
-    conesight_service::init_tracing();
-    let runtime = tokio::runtime::Builder::new_multi_thread()
-        .enable_all()
-        .build()
-        .context("starting the async runtime")?;
-    runtime.block_on(async {
-        let shutdown = Shutdown::new();
-        shutdown.trigger_on_signal();
-        let session = open_session(&args.zenoh).await?;
-        let topics = Topics::from_args(&args.zenoh)?;
-        let bound = serve(&session, &topics, args.addr, &shutdown).await?;
-        eprintln!("foxglove: ws://{bound} (in the Foxglove app: Open connection; Ctrl-C stops)");
-        shutdown.wait().await;
-        let _ = session.close().await;
-        Ok(())
-    })
+    crate::run_live_view(
+        &args.zenoh,
+        args.addr,
+        |session, topics, addr, shutdown| {
+            Box::pin(async move { serve(&session, &topics, addr, &shutdown).await })
+        },
+        |bound| {
+            eprintln!(
+                "foxglove: ws://{bound} (in the Foxglove app: Open connection; Ctrl-C stops)"
+            );
+        },
+    )
 }
 
 /// The channels of one camera.

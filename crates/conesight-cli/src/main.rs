@@ -90,6 +90,47 @@ enum Command {
     Foxglove(foxglove_view::FoxgloveArgs),
 }
 
+/// The multi-threaded tokio runtime of a command.
+pub(crate) fn async_runtime() -> anyhow::Result<tokio::runtime::Runtime> {
+    use anyhow::Context as _;
+    tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .context("starting the async runtime")
+}
+
+/// A server started on a session: `serve(session, topics, addr, shutdown)` gives the bound address.
+pub(crate) type ServeFn = fn(
+    conesight_bus::zenoh::Session,
+    conesight_bus::Topics,
+    std::net::SocketAddr,
+    conesight_pipeline::Shutdown,
+) -> std::pin::Pin<
+    Box<dyn std::future::Future<Output = anyhow::Result<std::net::SocketAddr>> + Send>,
+>;
+
+/// The body of a live-view command (`dashboard`, `foxglove`): tracing, a session on `zenoh`,
+/// `serve` on `addr`, `ready(bound)` printed, then until Ctrl-C.
+pub(crate) fn run_live_view(
+    zenoh: &conesight_bus::ZenohArgs,
+    addr: std::net::SocketAddr,
+    serve: ServeFn,
+    ready: impl FnOnce(std::net::SocketAddr),
+) -> anyhow::Result<()> {
+    conesight_service::init_tracing();
+    async_runtime()?.block_on(async {
+        let shutdown = conesight_pipeline::Shutdown::new();
+        shutdown.trigger_on_signal();
+        let session = conesight_bus::open_session(zenoh).await?;
+        let topics = conesight_bus::Topics::from_args(zenoh)?;
+        let bound = serve(session.clone(), topics, addr, shutdown.clone()).await?;
+        ready(bound);
+        shutdown.wait().await;
+        let _ = session.close().await;
+        Ok(())
+    })
+}
+
 /// The git revision the binary was built from (`build.rs`; `unknown` outside a checkout).
 pub(crate) const GIT_REVISION: &str = conesight_pipeline::presence::GIT_REVISION;
 

@@ -4,7 +4,6 @@
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
-use anyhow::Context;
 use conesight_bus::zenoh::sample::SampleKind;
 use conesight_bus::{ServiceQuery, Topics, ZenohArgs, open_session};
 use conesight_pipeline::Shutdown;
@@ -50,10 +49,7 @@ struct Presence<'a> {
 /// Runs `conesight status`; exit status 1 when no service is live (one-shot mode).
 pub fn run(args: &StatusArgs) -> anyhow::Result<std::process::ExitCode> {
     conesight_service::init_tracing();
-    let runtime = tokio::runtime::Builder::new_multi_thread()
-        .enable_all()
-        .build()
-        .context("starting the async runtime")?;
+    let runtime = crate::async_runtime()?;
     runtime.block_on(async {
         let session = open_session(&args.zenoh).await?;
         let topics = Topics::from_args(&args.zenoh)?;

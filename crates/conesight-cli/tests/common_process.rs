@@ -124,6 +124,35 @@ impl Drop for Process {
     }
 }
 
+/// `conesight run` of the whole pipeline on a looped 10-frame synthetic drive at 5 Hz until
+/// killed, in a namespace of its own, with `extra` flags (e.g. `--dashboard ADDR`); its out
+/// folder and logs in `dir`.
+pub fn start_looped_run(dir: &TempDir, name: &str, extra: &[&str]) -> Process {
+    let namespace = format!("{name}{}", std::process::id());
+    let listen = format!("tcp/127.0.0.1:{}", free_port());
+    let out = dir.join("out");
+    let log = dir.join("run.log");
+    let mut args = vec![
+        "run",
+        "--frames",
+        "0",
+        "--rate-hz",
+        "5",
+        "--preload",
+        "10",
+        "--namespace",
+        &namespace,
+        "--zenoh-listen",
+        &listen,
+        "--out",
+        out.to_str().unwrap(),
+        "--log-file",
+        log.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    Process::start("run", &args, &dir.join("run.stderr"))
+}
+
 /// The body of `GET path` on 127.0.0.1:`port` (`None` when nothing answers).
 pub fn http_get(port: u16, path: &str) -> Option<String> {
     let mut stream = TcpStream::connect(("127.0.0.1", port)).ok()?;

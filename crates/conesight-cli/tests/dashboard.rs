@@ -12,7 +12,7 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use base64::Engine;
-use common_process::{Process, TempDir, free_port, http_get};
+use common_process::{TempDir, free_port, http_get};
 use futures_util::{SinkExt, StreamExt};
 use serde_json::{Value, json};
 use tokio_tungstenite::tungstenite::Message;
@@ -115,30 +115,7 @@ async fn dashboard_in_chromium_shows_cones_that_move() {
     let dir = TempDir::new("dashboard");
     let port = free_port();
     let addr = format!("127.0.0.1:{port}");
-    let listen = format!("tcp/127.0.0.1:{}", free_port());
-    let _run = Process::start(
-        "run",
-        &[
-            "run",
-            "--frames",
-            "0",
-            "--rate-hz",
-            "5",
-            "--preload",
-            "10",
-            "--namespace",
-            &format!("dashboard{}", std::process::id()),
-            "--zenoh-listen",
-            &listen,
-            "--dashboard",
-            &addr,
-            "--out",
-            dir.join("out").to_str().unwrap(),
-            "--log-file",
-            dir.join("run.log").to_str().unwrap(),
-        ],
-        &dir.join("run.stderr"),
-    );
+    let _run = common_process::start_looped_run(&dir, "dashboard", &["--dashboard", &addr]);
     let started = Instant::now();
     loop {
         let cones = http_get(port, "/api/state")

@@ -10,7 +10,7 @@ mod common_process;
 use std::collections::HashMap;
 use std::time::{Duration, Instant};
 
-use common_process::{Process, TempDir, free_port};
+use common_process::{TempDir, free_port};
 use conesight_proto::{Message as _, pb};
 use futures_util::{SinkExt, StreamExt};
 use serde_json::{Value, json};
@@ -23,29 +23,8 @@ const WANTED: [&str; 3] = ["/front/image", "/scene", "/front/cones"];
 async fn foxglove_clients_get_image_scene_and_cones() {
     let dir = TempDir::new("foxglove");
     let port = free_port();
-    let _run = Process::start(
-        "run",
-        &[
-            "run",
-            "--frames",
-            "0",
-            "--rate-hz",
-            "5",
-            "--preload",
-            "10",
-            "--namespace",
-            &format!("foxglove{}", std::process::id()),
-            "--zenoh-listen",
-            &format!("tcp/127.0.0.1:{}", free_port()),
-            "--foxglove",
-            &format!("127.0.0.1:{port}"),
-            "--out",
-            dir.join("out").to_str().unwrap(),
-            "--log-file",
-            dir.join("run.log").to_str().unwrap(),
-        ],
-        &dir.join("run.stderr"),
-    );
+    let foxglove = format!("127.0.0.1:{port}");
+    let _run = common_process::start_looped_run(&dir, "foxglove", &["--foxglove", &foxglove]);
     let mut request = format!("ws://127.0.0.1:{port}/")
         .into_client_request()
         .unwrap();

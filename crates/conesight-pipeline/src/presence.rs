@@ -213,20 +213,13 @@ impl Node {
         let cache = latest.clone();
         let reply_key = key.clone();
         let queryable = self
-            .session
-            .declare_queryable(key.clone())
-            .callback(move |query: Query| {
+            .queryable(key.clone(), move |query: Query| {
                 let payload = cache.lock().unwrap_or_else(PoisonError::into_inner).clone();
                 if let Some(payload) = payload {
                     reply(&query, &reply_key, payload, Encoding::APPLICATION_PROTOBUF);
                 }
             })
-            .await
-            .map_err(|source| BusError::Declare {
-                role: "queryable",
-                key: key.to_string(),
-                source,
-            })?;
+            .await?;
         push_unique(
             &mut self
                 .identity
@@ -267,9 +260,7 @@ impl Node {
             let node = self.clone();
             let reply_key = key.clone();
             let queryable = self
-                .session
-                .declare_queryable(key.clone())
-                .callback(move |request: Query| match query {
+                .queryable(key.clone(), move |request: Query| match query {
                     ServiceQuery::Health => {
                         let json = serde_json::to_vec(&node.health()).unwrap_or_default();
                         reply(
@@ -295,12 +286,7 @@ impl Node {
                         Encoding::from(SCHEMA_ENCODING),
                     ),
                 })
-                .await
-                .map_err(|source| BusError::Declare {
-                    role: "queryable",
-                    key: key.to_string(),
-                    source,
-                })?;
+                .await?;
             queryables.push(queryable);
         }
         tracing::debug!(service = self.name, key = %token_key, "announced on the bus");
@@ -308,6 +294,25 @@ impl Node {
             _token: token,
             _queryables: queryables,
         })
+    }
+}
+
+impl Node {
+    /// A queryable on `key` answered by `callback` on Zenoh's thread.
+    async fn queryable(
+        &self,
+        key: KeyExpr<'static>,
+        callback: impl Fn(Query) + Send + Sync + 'static,
+    ) -> Result<Queryable<()>, BusError> {
+        self.session
+            .declare_queryable(key.clone())
+            .callback(callback)
+            .await
+            .map_err(|source| BusError::Declare {
+                role: "queryable",
+                key: key.to_string(),
+                source,
+            })
     }
 }
 
