@@ -174,6 +174,48 @@ pub async fn serve(
             anyhow::anyhow!("cannot start the Foxglove server on {addr} (--foxglove-addr): {error}")
         })?;
     let bound = SocketAddr::new(addr.ip(), server.port());
+    let task = follow(session, topics, ctx, shutdown).await?;
+    tokio::spawn(async move {
+        let _ = task.await;
+        let _ = server.stop();
+    });
+    Ok(bound)
+}
+
+/// `conesight record --foxglove PATH`: the same channels written into an MCAP file (through the
+/// SDK's writer), so a recording opens in Foxglove with `deploy/foxglove/conesight-layout.json`.
+/// Close the returned writer after `shutdown`.
+pub async fn record(
+    session: &Session,
+    topics: &Topics,
+    path: &std::path::Path,
+    shutdown: &Shutdown,
+) -> anyhow::Result<(
+    foxglove::McapWriterHandle<std::io::BufWriter<std::fs::File>>,
+    tokio::task::JoinHandle<()>,
+)> {
+    let ctx = Context::new();
+    let writer = foxglove::McapWriter::new()
+        .context(&ctx)
+        .create_new_buffered_file(path)
+        .map_err(|error| {
+            anyhow::anyhow!(
+                "cannot create the Foxglove recording {} (--foxglove): {error}",
+                path.display()
+            )
+        })?;
+    let task = follow(session, topics, ctx, shutdown).await?;
+    Ok((writer, task))
+}
+
+/// Subscribes to the run's frames, calibrations and cones and logs them on `ctx`'s channels
+/// until `shutdown`.
+async fn follow(
+    session: &Session,
+    topics: &Topics,
+    ctx: Arc<Context>,
+    shutdown: &Shutdown,
+) -> anyhow::Result<tokio::task::JoinHandle<()>> {
     let metrics = Arc::new(conesight_service::Metrics::for_service("foxglove", "*"));
     let view = Arc::new(View {
         scene: ctx.channel_builder("/scene").build(),
@@ -197,7 +239,7 @@ pub async fn serve(
         declare_subscriber(session, topics.all_cameras(Stream::Cones)?, Stream::Cones).await?;
     let topics = topics.clone();
     let shutdown = shutdown.clone();
-    tokio::spawn(async move {
+    Ok(tokio::spawn(async move {
         loop {
             tokio::select! {
                 () = shutdown.wait() => break,
@@ -215,9 +257,7 @@ pub async fn serve(
                 },
             }
         }
-        let _ = server.stop();
-    });
-    Ok(bound)
+    }))
 }
 
 fn camera_of<'k>(topics: &Topics, sample: &'k Sample) -> Option<&'k str> {

@@ -71,6 +71,10 @@ pub struct RecordArgs {
     /// Target uncompressed chunk size, MiB (memory per open chunk).
     #[arg(long = "chunk-mb", default_value_t = 8)]
     chunk_mb: u64,
+    /// Also write the Foxglove channels of `conesight foxglove` (image, calibration, transform,
+    /// 3D scene, cones) into this MCAP file: it opens with deploy/foxglove/conesight-layout.json.
+    #[arg(long)]
+    foxglove: Option<PathBuf>,
     /// Models the run uses, hashed (sha256) into the metadata, comma separated.
     #[arg(long, value_delimiter = ',')]
     models: Vec<PathBuf>,
@@ -114,6 +118,10 @@ async fn run_async(args: RecordArgs) -> anyhow::Result<()> {
     let recorder = Recorder::start(&session, &topics, options)
         .await
         .with_context(|| format!("starting the recorder on {}", args.out.display()))?;
+    let foxglove = match &args.foxglove {
+        Some(path) => Some(crate::foxglove_view::record(&session, &topics, path, &shutdown).await?),
+        None => None,
+    };
     eprintln!(
         "recording conesight/{}/** into {} (Ctrl-C stops)",
         topics.namespace(),
@@ -140,6 +148,14 @@ async fn run_async(args: RecordArgs) -> anyhow::Result<()> {
         }
     }
     progress.finish_and_clear();
+    shutdown.trigger();
+    if let Some((writer, task)) = foxglove {
+        let _ = task.await;
+        // Encodes still running finish into a closed writer and are dropped.
+        writer
+            .close()
+            .map_err(|error| anyhow::anyhow!("closing the Foxglove recording: {error}"))?;
+    }
     let stats = recorder.stats().clone();
     let files = tokio::task::block_in_place(|| recorder.stop())?;
     if let Err(error) = session.close().await {

@@ -126,8 +126,8 @@ impl Drop for Process {
 
 /// `conesight run` of the whole pipeline on a looped 10-frame synthetic drive at 5 Hz until
 /// killed, in a namespace of its own, with `extra` flags (e.g. `--dashboard ADDR`); its out
-/// folder and logs in `dir`.
-pub fn start_looped_run(dir: &TempDir, name: &str, extra: &[&str]) -> Process {
+/// folder and logs in `dir`. Returns the process, its Zenoh endpoint and its namespace.
+pub fn start_looped_run(dir: &TempDir, name: &str, extra: &[&str]) -> (Process, String, String) {
     let namespace = format!("{name}{}", std::process::id());
     let listen = format!("tcp/127.0.0.1:{}", free_port());
     let out = dir.join("out");
@@ -150,7 +150,8 @@ pub fn start_looped_run(dir: &TempDir, name: &str, extra: &[&str]) -> Process {
         log.to_str().unwrap(),
     ];
     args.extend_from_slice(extra);
-    Process::start("run", &args, &dir.join("run.stderr"))
+    let process = Process::start("run", &args, &dir.join("run.stderr"));
+    (process, listen, namespace)
 }
 
 /// The body of `GET path` on 127.0.0.1:`port` (`None` when nothing answers).

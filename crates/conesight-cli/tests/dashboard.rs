@@ -115,7 +115,7 @@ async fn dashboard_in_chromium_shows_cones_that_move() {
     let dir = TempDir::new("dashboard");
     let port = free_port();
     let addr = format!("127.0.0.1:{port}");
-    let _run = common_process::start_looped_run(&dir, "dashboard", &["--dashboard", &addr]);
+    let (_run, _, _) = common_process::start_looped_run(&dir, "dashboard", &["--dashboard", &addr]);
     let started = Instant::now();
     loop {
         let cones = http_get(port, "/api/state")

@@ -24,7 +24,8 @@ async fn foxglove_clients_get_image_scene_and_cones() {
     let dir = TempDir::new("foxglove");
     let port = free_port();
     let foxglove = format!("127.0.0.1:{port}");
-    let _run = common_process::start_looped_run(&dir, "foxglove", &["--foxglove", &foxglove]);
+    let (_run, endpoint, namespace) =
+        common_process::start_looped_run(&dir, "foxglove", &["--foxglove", &foxglove]);
     let mut request = format!("ws://127.0.0.1:{port}/")
         .into_client_request()
         .unwrap();
@@ -153,4 +154,55 @@ async fn foxglove_clients_get_image_scene_and_cones() {
     assert!(checked_scene, "no scene with a cone and its ellipsoid each");
     assert!(checked_cones, "no decodable cones");
     assert!(checked_image, "no JPEG image");
+
+    // A recording with the same channels (`conesight record --foxglove`) holds every topic the
+    // shipped layout shows.
+    let view = dir.join("view.mcap");
+    let record = std::process::Command::new(common_process::BIN)
+        .args([
+            "record",
+            "--namespace",
+            &namespace,
+            "--zenoh-connect",
+            &endpoint,
+        ])
+        .args(["--duration-s", "6", "--streams", "cones"])
+        .arg("--out")
+        .arg(dir.join("bus.mcap"))
+        .arg("--foxglove")
+        .arg(&view)
+        .output()
+        .unwrap();
+    assert!(
+        record.status.success(),
+        "{}",
+        String::from_utf8_lossy(&record.stderr)
+    );
+    let bytes = std::fs::read(&view).unwrap();
+    let mut counts: HashMap<String, usize> = HashMap::new();
+    for message in mcap::MessageStream::new(&bytes).unwrap() {
+        let message = message.unwrap();
+        *counts.entry(message.channel.topic.clone()).or_default() += 1;
+    }
+    eprintln!("conesight record --foxglove, 6 s: {counts:?}");
+    let layout = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../deploy/foxglove/conesight-layout.json"),
+    )
+    .unwrap();
+    for topic in [
+        "/front/image",
+        "/front/calibration",
+        "/scene",
+        "/front/cones",
+    ] {
+        assert!(
+            layout.contains(&format!("\"{topic}")),
+            "the layout does not show {topic}"
+        );
+        assert!(
+            counts.get(topic).copied().unwrap_or(0) >= 1,
+            "{topic} not in the recording: {counts:?}"
+        );
+    }
 }
