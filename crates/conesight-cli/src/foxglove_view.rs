@@ -321,13 +321,13 @@ fn on_camera_info(view: &Arc<View>, topics: &Topics, sample: &Sample) {
     let info: pb::CameraInfo = match decode(sample.payload()) {
         Ok(info) => info,
         Err(error) => {
-            return bad(&view, error.kind(), &format!("{camera}: {error}"));
+            return bad(view, error.kind(), &format!("{camera}: {error}"));
         }
     };
     let (cam, extrinsics) = match info.to_core() {
         Ok(calibration) => calibration,
         Err(error) => {
-            return bad(&view, error.kind(), &format!("{camera}: {error}"));
+            return bad(view, error.kind(), &format!("{camera}: {error}"));
         }
     };
     let stamp = timestamp(info.header.as_ref().map_or(0, |h| h.acquisition_time_ns));
@@ -402,13 +402,13 @@ fn on_cones(view: &Arc<View>, topics: &Topics, sample: &Sample) {
     let message: pb::Cones = match decode(sample.payload()) {
         Ok(message) => message,
         Err(error) => {
-            return bad(&view, error.kind(), &format!("{camera}: {error}"));
+            return bad(view, error.kind(), &format!("{camera}: {error}"));
         }
     };
     let located = match message.to_core() {
         Ok(located) => located,
         Err(error) => {
-            return bad(&view, error.kind(), &format!("{camera}: {error}"));
+            return bad(view, error.kind(), &format!("{camera}: {error}"));
         }
     };
     let stamp = timestamp(message.header.as_ref().map_or(0, |h| h.acquisition_time_ns));
@@ -419,7 +419,7 @@ fn on_cones(view: &Arc<View>, topics: &Topics, sample: &Sample) {
         let covariance: Matrix3<f64> = cone.covariance_in_vehicle_m2;
         if !(p.coords.iter().all(|v| v.is_finite()) && covariance.iter().all(|v| v.is_finite())) {
             bad(
-                &view,
+                view,
                 "non_finite",
                 &format!("{camera}: a cone with a non-finite position or covariance"),
             );
@@ -499,7 +499,7 @@ fn on_cones(view: &Arc<View>, topics: &Topics, sample: &Sample) {
     let raw = sample.payload().to_bytes();
     let frustum = view.with_camera(camera, |channels| {
         channels.cones.log(&raw);
-        channels.frustum.clone()
+        channels.frustum
     });
     if let Ok(Some([a, b, c, d])) = frustum {
         let origin = Point3 {
@@ -508,22 +508,7 @@ fn on_cones(view: &Arc<View>, topics: &Topics, sample: &Sample) {
             z: 0.0,
         };
         let points = vec![
-            origin.clone(),
-            a.clone(),
-            origin.clone(),
-            b.clone(),
-            origin.clone(),
-            c.clone(),
-            origin,
-            d.clone(),
-            a.clone(),
-            b.clone(),
-            b,
-            c.clone(),
-            c,
-            d.clone(),
-            d,
-            a,
+            origin, a, origin, b, origin, c, origin, d, a, b, b, c, c, d, d, a,
         ];
         entities.push(SceneEntity {
             timestamp: Some(stamp),

@@ -50,7 +50,7 @@ enum Command {
     /// The pipeline: camera, detector, keypoints and localiser services in one process over an
     /// embedded Zenoh session, on a synthetic sequence (live table against ground truth, PNGs)
     /// or a camera (`--source gst:PIPELINE | video:PATH | folder:DIR --camera-info FILE`).
-    Run(run::RunArgs),
+    Run(Box<run::RunArgs>),
     /// The pipeline in-process on image files: one JSON object per image on stdout.
     Predict(predict::PredictArgs),
     /// The keypoint network on cone crops: one JSON object per crop on stdout.
@@ -137,7 +137,7 @@ pub(crate) const GIT_REVISION: &str = conesight_pipeline::presence::GIT_REVISION
 fn main() -> anyhow::Result<std::process::ExitCode> {
     let cli = Cli::parse();
     match cli.command {
-        Command::Run(args) => run::run(args)?,
+        Command::Run(args) => run::run(*args)?,
         Command::Predict(args) => predict::run(&args)?,
         Command::Keypoints(args) => keypoints_cmd::run(&args)?,
         Command::Demo(args) => demo::run(&args)?,
