@@ -137,6 +137,8 @@ async fn dashboard_in_chromium_shows_cones_that_move() {
             "--headless",
             "--no-sandbox",
             "--disable-gpu",
+            // Containers often give /dev/shm 64 MiB; Chromium then uses /tmp instead.
+            "--disable-dev-shm-usage",
             "--hide-scrollbars",
             "--window-size=1300,900",
             "--remote-debugging-port=0",
