@@ -268,13 +268,16 @@ async fn process(
     let shutdown = Shutdown::new();
     let mut tasks = Vec::new();
     let mut readiness = Vec::new();
-    let detector = Node::new(
-        "detector",
-        &camera,
-        session.clone(),
-        topics.clone(),
-        Some(MAX_INPUT_AGE),
-    );
+    let node = |name: &'static str| {
+        Node::new(
+            name,
+            &camera,
+            session.clone(),
+            topics.clone(),
+            Some(MAX_INPUT_AGE),
+        )
+    };
+    let detector = node("detector");
     readiness.push(detector.readiness.clone());
     let mut detector_args = DetectorArgs::new(common.clone());
     detector_args.model = models.get("detector").map(|m| PathBuf::from(&m.path));
@@ -283,13 +286,7 @@ async fn process(
     tasks.push(tokio::spawn(async move {
         conesight_detector_service::run(&detector_args, detector, stop).await
     }));
-    let keypoints = Node::new(
-        "keypoints",
-        &camera,
-        session.clone(),
-        topics.clone(),
-        Some(MAX_INPUT_AGE),
-    );
+    let keypoints = node("keypoints");
     readiness.push(keypoints.readiness.clone());
     let mut keypoints_args = KeypointsArgs::new(common.clone());
     keypoints_args.model = models.get("keypoints").map(|m| PathBuf::from(&m.path));
@@ -298,13 +295,7 @@ async fn process(
     tasks.push(tokio::spawn(async move {
         conesight_keypoints_service::run(&keypoints_args, keypoints, stop).await
     }));
-    let localiser = Node::new(
-        "localiser",
-        &camera,
-        session.clone(),
-        topics.clone(),
-        Some(MAX_INPUT_AGE),
-    );
+    let localiser = node("localiser");
     readiness.push(localiser.readiness.clone());
     let localiser_args = LocaliserArgs::new(common.clone());
     let stop = shutdown.clone();
