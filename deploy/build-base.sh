@@ -80,8 +80,9 @@ mkdir -p "$work"
 foreign=()
 if [[ "$arch" != "$host_arch" ]]; then
     # debootstrap runs the second stage inside the chroot, which needs the target's binaries to
-    # execute here: qemu-user-static with binfmt_misc registered (deploy/arm64/image.sh).
+    # execute here: qemu-user-static with binfmt_misc registered (deploy/arm64/qemu.sh).
     foreign=(--foreign)
+    [[ "$arch" == arm64 ]] && "${SUDO[@]}" "$ROOT/deploy/arm64/qemu.sh"
 fi
 
 # The camera service and the CLI link GStreamer (camera sources `gst:` and `video:`): its

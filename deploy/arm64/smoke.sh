@@ -6,7 +6,7 @@
 #   deploy/arm64/smoke.sh              # in the conesight/cli:arm64 container (docker + binfmt)
 #   deploy/arm64/smoke.sh --no-docker  # the cross-built binary on the arm64 rootfs (qemu -L)
 # x86 side: $CONESIGHT_X86_BIN, else target/release/conesight, else target/debug/conesight.
-# Outputs in build/arm64/smoke/. Needs qemu-user-static (binfmt registered for docker).
+# Outputs in build/arm64/smoke/. qemu-user-static and binfmt are set up by qemu.sh (root).
 set -euo pipefail
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
@@ -17,6 +17,8 @@ out="build/arm64/smoke"
 mkdir -p "$out"
 image="docs/sample/frame.jpg"
 camera="docs/sample/camera.yaml"
+
+deploy/arm64/qemu.sh
 
 x86="${CONESIGHT_X86_BIN:-}"
 if [[ -z "$x86" ]]; then
