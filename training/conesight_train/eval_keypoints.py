@@ -36,16 +36,8 @@ from conesight_train.inspect_data import rektnet_crops
 from conesight_train.keypoints import KEYPOINT_NAMES
 from conesight_train.metrics import KeypointErrors
 from conesight_train.preprocess import patch_to_input
-from conesight_train.refine import Predictor, evaluate_refined
+from conesight_train.refine import REFRAMINGS, Predictor, evaluate_refined
 from conesight_train.train_keypoints import ConcatSources, open_real_source, open_sources
-
-# Reframings of real crops (issue 13): as another labeller or detector would frame the cone.
-# "shift_20pct" pools the four moves of 20 % of the box (left, right, up, down).
-REFRAMINGS: dict[str, list[tuple[float, float, float]]] = {
-    "shift_20pct": [(0.2, 0.0, 1.0), (-0.2, 0.0, 1.0), (0.0, 0.2, 1.0), (0.0, -0.2, 1.0)],
-    "scale_0.8x": [(0.0, 0.0, 0.8)],
-    "scale_1.3x": [(0.0, 0.0, 1.3)],
-}
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_REAL_CROPS = REPO_ROOT.parent / "shared" / "data" / "real-dev" / "fsoco-keypoint-crops"

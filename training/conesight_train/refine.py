@@ -29,6 +29,27 @@ KEYPOINT_BOX_MARGINS = (0.28, 0.28, 0.08, 0.25)
 # Apex-to-base height below which the keypoints are taken as no cone (keep the first box).
 MIN_KEYPOINT_HEIGHT_PX = 2.0
 
+# Reframings of real crops (issue 13): as another labeller or detector would frame the cone,
+# each a list of (dx, dy, scale) moves of the box (see RealCropPatches). "shift_20pct" pools the
+# four moves of 20 % of the box (left, right, up, down).
+REFRAMINGS: dict[str, list[tuple[float, float, float]]] = {
+    "shift_20pct": [(0.2, 0.0, 1.0), (-0.2, 0.0, 1.0), (0.0, 0.2, 1.0), (0.0, -0.2, 1.0)],
+    "scale_0.8x": [(0.0, 0.0, 0.8)],
+    "scale_1.3x": [(0.0, 0.0, 1.3)],
+}
+
+
+def reframe_scale(label: str) -> float:
+    """How much larger the reframed box is than the labelled one (1.0 for shifts).
+
+    The patch is always 80x80, so a box `scale` times larger shows the cone `1 / scale` times
+    smaller: an error of e reframed-patch px is e * scale px at the cone's as-framed size."""
+    scales = {frame[2] for frame in REFRAMINGS[label]}
+    if len(scales) != 1:
+        raise ValueError(f"reframing {label!r} mixes scales {sorted(scales)}")
+    return scales.pop()
+
+
 # float32 [N, 3, 80, 80] -> (keypoints [N, 7, 2], sigma_px [N, 7] or None)
 Predictor = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray | None]]
 

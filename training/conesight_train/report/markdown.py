@@ -5,6 +5,11 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
+from conesight_train.refine import reframe_scale
+
+# Issue 13: a reframed crop's mean error may grow by at most this much over the crop as framed.
+REFRAMING_GROWTH_LIMIT = 1.25
+
 
 def fmt(value: float | None, digits: int = 3, unit: str = "") -> str:
     """A number with `digits` decimals and a unit, or `-`."""
@@ -84,6 +89,103 @@ def keypoint_section(kp: dict[str, Any]) -> list[str]:
         )
         out += [table(["", *labels], rows), ""]
     return out
+
+
+def framing_growth(kp: dict[str, Any], model: str = "production") -> list[dict[str, Any]]:
+    """Mean error of each reframing over the crops as framed, per real set and pooled.
+
+    Two units: reframed-patch px (the error as the network sees it) and cone px (times the
+    reframing's scale: the error at the cone's as-framed size, so a framing-invariant network
+    reads 1.0 at 0.8x and 1.3x alike). Pooled = crop-weighted over the real sets."""
+    evals = kp.get("eval_keypoints", {})
+    rows: list[dict[str, Any]] = []
+    pooled: dict[str, list[float]] = {}
+    for name, by_model in evals.items():
+        if "@" in name or not name.startswith("real_val_"):
+            continue
+        base = (by_model or {}).get(model)
+        if not isinstance(base, dict) or "mean_px" not in base:
+            continue
+        for key, reframed in evals.items():
+            if not key.startswith(name + "@"):
+                continue
+            label = key.split("@", 1)[1]
+            moved = (reframed or {}).get(model)
+            if not isinstance(moved, dict) or "mean_px" not in moved:
+                continue
+            scale = reframe_scale(label)
+            row = {
+                "set": name.removeprefix("real_val_"),
+                "reframing": label,
+                "crops": moved["count"],
+                "as_framed_px": base["mean_px"],
+                "reframed_px": moved["mean_px"],
+                "growth_patch": moved["mean_px"] / base["mean_px"],
+                "growth_cone": moved["mean_px"] * scale / base["mean_px"],
+            }
+            rows.append(row)
+            # Pool sums: base error x crops, reframed error x crops, in both units.
+            acc = pooled.setdefault(label, [0.0, 0.0, 0.0, 0.0])
+            per_base = moved["count"] / base["count"]
+            acc[0] += base["mean_px"] * base["count"] * per_base
+            acc[1] += moved["mean_px"] * moved["count"]
+            acc[2] += moved["mean_px"] * moved["count"] * scale
+            acc[3] += moved["count"]
+    for label, (base_sum, moved_sum, cone_sum, count) in pooled.items():
+        rows.append(
+            {
+                "set": "pooled",
+                "reframing": label,
+                "crops": int(count),
+                "as_framed_px": base_sum / count,
+                "reframed_px": moved_sum / count,
+                "growth_patch": moved_sum / base_sum,
+                "growth_cone": cone_sum / base_sum,
+            }
+        )
+    return rows
+
+
+def framing_section(kp: dict[str, Any]) -> list[str]:
+    """Issue 13's reframing check: growth of the mean error, in both units, per set and pooled."""
+    rows = framing_growth(kp)
+    if not rows:
+        return []
+    limit = REFRAMING_GROWTH_LIMIT
+    return [
+        "**Reframed crops** (the production network with the keypoint stage's re-framing): "
+        "the mean error of each reframing over the same crops as framed. In reframed-patch px a "
+        "framing-invariant network reads 1.25x at 0.8x and 0.77x at 1.3x by arithmetic alone "
+        "(the cone fills 1/scale of the box); cone px multiplies by the scale and compares like "
+        f"with like. Issue 13 asks for growth <= {limit:.2f}x.",
+        "",
+        table(
+            [
+                "set",
+                "reframing",
+                "crops",
+                "as framed (px)",
+                "reframed (patch px)",
+                "growth, patch px",
+                "growth, cone px",
+                f"<= {limit:.2f}x (cone px)",
+            ],
+            [
+                [
+                    r["set"],
+                    r["reframing"],
+                    str(r["crops"]),
+                    fmt(r["as_framed_px"]),
+                    fmt(r["reframed_px"]),
+                    fmt(r["growth_patch"], 2, "x"),
+                    fmt(r["growth_cone"], 2, "x"),
+                    "yes" if r["growth_cone"] <= limit else "no",
+                ]
+                for r in rows
+            ],
+        ),
+        "",
+    ]
 
 
 def real_detection_section(real: dict[str, Any]) -> list[str]:
@@ -260,6 +362,7 @@ def render(results: dict[str, Any]) -> str:
         + ".",
         "",
     ]
+    lines += framing_section(kp)
     lines += keypoint_section(kp)
     if kp.get("exact_boxes_in_frames"):
         lines += [
