@@ -40,12 +40,23 @@ for fs in proc dev; do
     mounted+=("$chroot_dir/$fs")
 done
 cp /etc/resolv.conf "$chroot_dir/etc/resolv.conf"
+# The host's CA bundle for cargo's downloads: a TLS-inspecting proxy's CA is trusted on the host
+# only, and without it the chroot's cargo fails with "SSL certificate problem: self-signed
+# certificate in certificate chain".
+host_ca="${CARGO_HTTP_CAINFO:-${SSL_CERT_FILE:-/etc/ssl/certs/ca-certificates.crt}}"
+chroot_ca=/etc/ssl/certs/conesight-host-ca.crt
+if [[ -f "$host_ca" ]]; then
+    cp "$host_ca" "$chroot_dir$chroot_ca"
+else
+    chroot_ca=/etc/ssl/certs/ca-certificates.crt
+fi
 
 triple=aarch64-unknown-linux-gnu
 chroot "$chroot_dir" /usr/bin/env -i \
     PATH=/usr/bin:/bin HOME=/root \
     CARGO_HOME=/root/.cargo-cross \
     CARGO_REGISTRIES_CRATES_IO_PROTOCOL=sparse \
+    CARGO_HTTP_CAINFO="$chroot_ca" \
     CARGO_TARGET_DIR="$ROOT/target/aarch64-cross" \
     CARGO_TARGET_AARCH64_UNKNOWN_LINUX_GNU_LINKER=aarch64-linux-gnu-gcc \
     CC_aarch64_unknown_linux_gnu=aarch64-linux-gnu-gcc \
