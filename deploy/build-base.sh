@@ -127,11 +127,25 @@ echo "build-base.sh: trimming"
 
 "${SUDO[@]}" tar --numeric-owner -C "$rootfs" -cf "$tarball" .
 echo "build-base.sh: importing $tag"
-platform=()
-[[ "$arch" != "$host_arch" ]] && platform=(--platform "linux/$arch")
-docker import "${platform[@]}" \
-    --change 'ENV LANG=C.UTF-8' \
-    --change 'CMD ["/bin/bash"]' \
-    --message "debootstrap --variant=minbase $release $arch" \
-    "$tarball" "$tag"
+if [[ "$arch" == "$host_arch" ]]; then
+    docker import \
+        --change 'ENV LANG=C.UTF-8' \
+        --change 'CMD ["/bin/bash"]' \
+        --message "debootstrap --variant=minbase $release $arch" \
+        "$tarball" "$tag"
+else
+    # `docker import --platform` is ignored by Docker 20.10 (the image says amd64, and the first
+    # COPY onto it fails with "does not match the specified platform"); a FROM scratch build with
+    # --platform records the architecture.
+    context="$work/context"
+    rm -rf "$context"
+    mkdir -p "$context"
+    ln -f "$tarball" "$context/rootfs.tar"
+    printf '%s\n' 'FROM scratch' 'ADD rootfs.tar /' 'ENV LANG=C.UTF-8' 'CMD ["/bin/bash"]' \
+        >"$context/Dockerfile"
+    DOCKER_BUILDKIT=0 docker build --quiet --platform "linux/$arch" \
+        --label "org.opencontainers.image.description=debootstrap --variant=minbase $release $arch" \
+        -t "$tag" "$context"
+    rm -rf "$context"
+fi
 docker image ls "$tag"
