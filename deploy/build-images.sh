@@ -120,7 +120,15 @@ for t in "${ALL_TARGETS[@]}"; do
     fi
     cp "$bin" "$ctx/bin/"
 done
-strip --strip-debug "$ctx"/bin/* 2>/dev/null || true
+# Debuginfo off (the release profile keeps it for backtraces; images stay small). The host's
+# strip reads only its own architecture, so arm64 binaries take binutils-aarch64-linux-gnu's.
+strip_tool="strip"
+if [[ -n "$tag_suffix" ]]; then
+    strip_tool=aarch64-linux-gnu-strip
+    command -v "$strip_tool" >/dev/null ||
+        DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends binutils-aarch64-linux-gnu
+fi
+"$strip_tool" --strip-debug "$ctx"/bin/*
 cp "$ORT_LIB" "$ctx/onnxruntime/"
 shopt -s nullglob
 # Only the models the services run (and their cards): the paper baseline and the ablation

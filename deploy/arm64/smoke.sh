@@ -6,7 +6,9 @@
 #   deploy/arm64/smoke.sh              # in the conesight/cli:arm64 container (docker + binfmt)
 #   deploy/arm64/smoke.sh --no-docker  # the cross-built binary on the arm64 rootfs (qemu -L)
 # x86 side: $CONESIGHT_X86_BIN, else target/release/conesight, else target/debug/conesight.
-# Outputs in build/arm64/smoke/. qemu-user-static and binfmt are set up by qemu.sh (root).
+# The emulated CPU is a Cortex-A76 (ARMv8.2 with dot product, no SVE/SME: the nearest qemu has to
+# a Jetson Orin's Cortex-A78AE); CONESIGHT_QEMU_CPU=max gives every extension qemu knows.
+# Outputs in build/arm64/smoke/. qemu (>= 8.1) and binfmt are set up by qemu.sh (root).
 set -euo pipefail
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
@@ -19,6 +21,7 @@ image="docs/sample/frame.jpg"
 camera="docs/sample/camera.yaml"
 
 deploy/arm64/qemu.sh
+export QEMU_CPU="${CONESIGHT_QEMU_CPU:-cortex-a76}"
 
 x86="${CONESIGHT_X86_BIN:-}"
 if [[ -z "$x86" ]]; then
@@ -32,19 +35,20 @@ if [[ -z "$x86" ]]; then
 fi
 
 if [[ $use_docker -eq 1 ]]; then
-    arm=(docker run --rm --platform linux/arm64 -v "$ROOT/docs/sample:/sample:ro"
+    arm=(docker run --rm --platform linux/arm64 -e QEMU_CPU -v "$ROOT/docs/sample:/sample:ro"
         --entrypoint /opt/conesight/bin/conesight conesight/cli:arm64)
     arm_image="/sample/frame.jpg"
     arm_camera="/sample/camera.yaml"
 else
     rootfs="build/base/${CONESIGHT_ARM64_RELEASE:-trixie}-arm64/rootfs"
     arm=(env ORT_DYLIB_PATH="$ROOT/build/arm64/onnxruntime/libonnxruntime.so.1.31.1"
-        qemu-aarch64-static -L "$rootfs"
+        build/arm64/qemu/qemu-aarch64 -L "$rootfs"
         target/aarch64-cross/aarch64-unknown-linux-gnu/release/conesight)
     arm_image="$image"
     arm_camera="$camera"
 fi
 
+echo "smoke.sh: qemu CPU $QEMU_CPU"
 echo "smoke.sh: arm64 --version: $("${arm[@]}" --version)"
 [[ $use_docker -eq 0 ]] && echo "smoke.sh: $(file -L "${arm[-1]}")"
 
