@@ -5,7 +5,7 @@
 #
 #   deploy/build-base.sh                 # conesight/base:<host release>, skipped if it exists
 #   deploy/build-base.sh --force         # rebuild even if the image exists
-#   deploy/build-base.sh --arch arm64 --release trixie  # foreign arch (Jetson): qemu-user-static + binfmt; deploy/arm64/
+#   deploy/build-base.sh --arch arm64 --release trixie  # foreign arch (Jetson): qemu-user + binfmt (qemu.sh); deploy/arm64/
 #   deploy/build-base.sh --release bookworm  # on a non-Debian host (Ubuntu, L4T)
 #
 # The service binaries are built on the host and linked against the host's glibc, so the base
@@ -80,7 +80,7 @@ mkdir -p "$work"
 foreign=()
 if [[ "$arch" != "$host_arch" ]]; then
     # debootstrap runs the second stage inside the chroot, which needs the target's binaries to
-    # execute here: qemu-user-static with binfmt_misc registered (deploy/arm64/qemu.sh).
+    # execute here: qemu-user >= 8.1 registered with binfmt_misc, flag F (deploy/arm64/qemu.sh).
     foreign=(--foreign)
     [[ "$arch" == arm64 ]] && "${SUDO[@]}" "$ROOT/deploy/arm64/qemu.sh"
 fi
