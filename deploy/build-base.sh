@@ -97,14 +97,14 @@ echo "build-base.sh: debootstrap $release ($arch, minbase) into $rootfs"
     --include="$runtime_packages" "$release" "$rootfs" "$mirror"
 
 if [[ ${#foreign[@]} -gt 0 ]]; then
-    qemu="/usr/bin/qemu-$(case "$arch" in arm64) echo aarch64 ;; *) echo "$arch" ;; esac)-static"
-    if [[ ! -x "$qemu" ]]; then
-        echo "build-base.sh: $qemu missing (apt-get install qemu-user-static binfmt-support)" >&2
+    # binfmt's flag F (qemu.sh's and Debian's qemu-user-static's): the kernel holds the
+    # interpreter open, so the chroot needs no copy of qemu.
+    qemu_arch="$(case "$arch" in arm64) echo aarch64 ;; *) echo "$arch" ;; esac)"
+    if [[ ! -e "/proc/sys/fs/binfmt_misc/qemu-$qemu_arch" ]]; then
+        echo "build-base.sh: no binfmt_misc entry qemu-$qemu_arch: install qemu-user-static" >&2
         exit 1
     fi
-    "${SUDO[@]}" cp "$qemu" "$rootfs/usr/bin/"
     "${SUDO[@]}" chroot "$rootfs" /debootstrap/debootstrap --second-stage
-    "${SUDO[@]}" rm -f "$rootfs/usr/bin/$(basename "$qemu")"
 fi
 
 # Trim what a service container never uses (as Debian's own -slim images do): package lists
