@@ -96,6 +96,7 @@ def test_training_crops_keep_boxes_on_the_cones():
     params = DetectorAugmentParams(
         crop_width_px=128,
         crop_height_px=96,
+        p_hsv=0.0,
         photometric=DetectorAugmentParams().photometric.__class__(
             p_colour=0, p_gamma=0, p_blur=0, p_noise=0, p_jpeg=0
         ),

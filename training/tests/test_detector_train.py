@@ -13,7 +13,7 @@ from conesight_train.detector.dataset import FrameDataset, MixedDataset
 from conesight_train.detector.loss import detector_loss
 from conesight_train.detector.model import ConeDetector, DetectorParams, multiply_accumulates
 from conesight_train.detector.onnx_export import compare_with_pytorch, export_onnx
-from conesight_train.detector.train import load_checkpoint, lr_factor, train
+from conesight_train.detector.train import WeightAverage, load_checkpoint, lr_factor, train
 
 
 def test_a_few_steps_lower_the_loss_on_a_fixed_batch():
@@ -105,3 +105,55 @@ def test_old_band_settings_are_refused_with_a_reason():
 def test_default_network_is_light():
     macs = multiply_accumulates(ConeDetector(), (608, 960))
     assert 50e6 < macs < 1.5e9
+
+
+def test_cpu_budget_stops_the_run_and_decays_the_rate(tmp_path):
+    config = tiny_run("toy:16", "", tmp_path, steps=10_000, max_cpu_minutes=0.03, val_every=10_000)
+    summary = train(config, progress=False)
+    assert 1 <= summary["steps"] < 10_000
+    assert summary["cpu_seconds"] >= 1.8
+    assert lr_factor(2, config, 0.0, 0.9) == pytest.approx(0.05 + 0.95 * 0.5, abs=1e-6)
+    assert lr_factor(2, config, 0.0, 5.0) == pytest.approx(0.05)
+
+
+def test_weight_average_lags_the_live_weights_and_averages_batch_norm():
+    torch.manual_seed(0)
+    model = ConeDetector(TINY)
+    average = WeightAverage(model, decay=0.9, ramp_steps=1)
+    first = {k: v.clone() for k, v in model.state_dict().items()}
+    with torch.no_grad():
+        for value in model.state_dict().values():
+            if value.dtype.is_floating_point:
+                value.add_(1.0)
+    for _ in range(100):
+        average.update(model)
+    # After many updates towards the moved weights the average is there, within the ramp.
+    for name, value in average.model.state_dict().items():
+        if value.dtype.is_floating_point:
+            torch.testing.assert_close(value, first[name] + 1.0, atol=1e-3, rtol=0)
+    # Once the ramp is over, one update with a high decay moves it only a little.
+    slow = WeightAverage(ConeDetector(TINY), decay=0.99, ramp_steps=1)
+    slow.updates = 1000
+    before = next(slow.model.parameters()).clone()
+    live = ConeDetector(TINY)
+    slow.update(live)
+    after = next(slow.model.parameters())
+    target = next(live.parameters())
+    assert (after - before).abs().sum() < 0.05 * (target - before).abs().sum()
+
+
+def test_averaged_run_checkpoints_the_average_and_resumes_the_live_weights(tmp_path):
+    config = tiny_run(
+        "toy:16", "toy:4:9", tmp_path, steps=4, batch_size=4, val_every=2, ema_decay=0.9
+    )
+    train(config, progress=False)
+    state = load_checkpoint(tmp_path / "last.pt")
+    assert state["ema_updates"] == 4
+    live, averaged = state["train_model_state"], state["model_state"]
+    assert any(not torch.equal(live[k], averaged[k]) for k in live)
+    # The per-step checkpoints (the curve) keep only the averaged weights.
+    assert "train_model_state" not in load_checkpoint(tmp_path / "steps" / "000004.pt")
+    config.steps = 6
+    resumed = train(config, resume=True, progress=False)
+    assert resumed["steps"] == 6
+    assert load_checkpoint(tmp_path / "last.pt")["ema_updates"] == 6

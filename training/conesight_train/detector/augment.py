@@ -6,9 +6,13 @@ multiple (`scale_range`, log-uniform) of its inference scale, so the network see
 every size the same camera gives them and at those of other resolutions. The window is centred
 near a random cone (`p_on_cone`) or anywhere, and may reach past the frame (grey fill, as the
 inference input's padding): cones appear in every part of the input, the property that makes
-the detector indifferent to camera pitch, mount height and the horizon. Then a horizontal flip
-(classes unchanged: a mirrored blue cone is still blue) and the photometric augmentation of the
-keypoint pipeline (colour, gamma, blur, noise, JPEG).
+the detector indifferent to camera pitch, mount height and the horizon. The cone a window is
+centred on is drawn with a weight per class (`centre_class_weights`), so the rare orange and
+large orange cones are seen more often than their share of the labels. Then a horizontal flip
+(classes unchanged: a mirrored blue cone is still blue), an HSV jitter that keeps hue within a
+few degrees (`hsv_gains`, YOLO's recipe: the keypoint pipeline's per-channel gains and offsets
+turn a yellow cone orange, and yellow and orange are two classes here), and the rest of the
+photometric augmentation of the keypoint pipeline (gamma, blur, noise, JPEG).
 
 Frames come at full resolution (`LabelledFrame`) or box-filtered by a factor (`ReducedFrame`,
 the renderer cache); boxes are always in continuous full-frame pixels. Boxes keep their part
@@ -40,9 +44,21 @@ class DetectorAugmentParams:
     # Multiples of the frame's inference scale (log-uniform).
     scale_range: tuple[float, float] = (0.6, 1.6)
     p_on_cone: float = 0.7
+    # Weight of a cone of each class (blue, yellow, orange, large orange) when choosing the
+    # cone a window is centred on: about the square root of the classes' inverse frequency in
+    # the real training frames (8,310 / 8,509 / 1,870 / 462 labels).
+    centre_class_weights: tuple[float, ...] = (1.0, 1.0, 2.0, 4.0)
     p_flip: float = 0.5
+    # HSV jitter: hue shift as a fraction of the circle (0.015 = +-5.4 degrees), saturation
+    # and value gains 1 +- these (uniform); applied with probability p_hsv.
+    p_hsv: float = 0.8
+    hsv_gains: tuple[float, float, float] = (0.015, 0.6, 0.35)
+    # The per-channel colour gain and offset stay off (p_colour 0): they shift hue by tens of
+    # degrees; gamma, blur, noise and JPEG as in the keypoint pipeline.
     photometric: AugmentParams = field(
-        default_factory=lambda: AugmentParams(p_blur=0.3, blur_sigma_max_px=1.0, p_jpeg=0.3)
+        default_factory=lambda: AugmentParams(
+            p_colour=0.0, p_blur=0.3, blur_sigma_max_px=1.0, p_jpeg=0.3
+        )
     )
 
 
@@ -56,6 +72,21 @@ class InputSample:
     range_m: np.ndarray
     difficult: np.ndarray
     scale_xy: tuple[float, float]  # input px per frame px (inference; 0 for training crops)
+
+
+def hsv_jitter(
+    image: np.ndarray, rng: np.random.Generator, gains: tuple[float, float, float]
+) -> np.ndarray:
+    """RGB uint8 image with its hue shifted by up to gains[0] of the circle and its saturation
+    and value scaled by 1 +- gains[1], gains[2] (lookup tables on OpenCV's 8-bit HSV)."""
+    dh, ds, dv = rng.uniform(-1.0, 1.0, 3) * np.asarray(gains)
+    hue, sat, val = cv2.split(cv2.cvtColor(image, cv2.COLOR_RGB2HSV))
+    x = np.arange(256, dtype=np.float32)
+    lut_hue = np.mod(np.round(x + dh * 180.0), 180).astype(np.uint8)
+    lut_sat = np.clip(np.round(x * (1.0 + ds)), 0, 255).astype(np.uint8)
+    lut_val = np.clip(np.round(x * (1.0 + dv)), 0, 255).astype(np.uint8)
+    hsv = cv2.merge((cv2.LUT(hue, lut_hue), cv2.LUT(sat, lut_sat), cv2.LUT(val, lut_val)))
+    return cv2.cvtColor(hsv, cv2.COLOR_HSV2RGB)
 
 
 def _keep_visible(
@@ -111,9 +142,10 @@ def train_sample(
     kx, ky = new_w / sw * per_frame_px, new_h / sh * per_frame_px  # input px per frame px
     boxes = frame.boxes_px.astype(np.float64).reshape(-1, 4) * [kx, ky, kx, ky]
     cw, ch = p.crop_width_px, p.crop_height_px
-    usable = np.nonzero(~frame.difficult_mask())[0]
+    usable = np.nonzero(~frame.difficult_mask() & (frame.classes >= 0))[0]
     if len(usable) and rng.random() < p.p_on_cone:
-        b = boxes[usable[rng.integers(len(usable))]]
+        weights = np.asarray(p.centre_class_weights, np.float64)[frame.classes[usable]]
+        b = boxes[usable[rng.choice(len(usable), p=weights / weights.sum())]]
         x0 = (b[0] + b[2]) / 2 - rng.uniform(0.1, 0.9) * cw
         y0 = (b[1] + b[3]) / 2 - rng.uniform(0.1, 0.9) * ch
     else:
@@ -131,6 +163,9 @@ def train_sample(
     if rng.random() < p.p_flip:
         canvas = canvas[:, ::-1]
         boxes[:, [0, 2]] = cw - boxes[:, [2, 0]]
-    image = photometric(np.ascontiguousarray(canvas), rng, p.photometric)
+    canvas = np.ascontiguousarray(canvas)
+    if rng.random() < p.p_hsv:
+        canvas = hsv_jitter(canvas, rng, p.hsv_gains)
+    image = photometric(canvas, rng, p.photometric)
     image = np.ascontiguousarray(image.transpose(2, 0, 1), dtype=np.float32)
     return InputSample(image, *_keep_visible(boxes, frame, cw, ch), (0.0, 0.0))

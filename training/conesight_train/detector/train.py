@@ -1,10 +1,11 @@
 """Detector training loop and CLI (`conesight-train-detector`): seeded, tqdm progress, AdamW
-with warm-up and cosine decay, random crops drawn from several sources by weight (real and
+with warm-up and cosine decay, an exponential moving average of the weights (`ema_decay`),
+random crops drawn from several sources by weight (real and
 rendered frames in one batch, `dataset.MixedDataset`), checkpoints (`last.pt` every validation,
 `best.pt` by val mAP, and `steps/NNNNNN.pt` so the curve of any metric against training time
 can be drawn afterwards), exact resume (`--resume`), YAML config with flag overrides, and an
-optional wall-clock budget (`max_minutes`). The history records wall and CPU seconds (this
-process and its data-loader workers).
+optional wall-clock or CPU budget (`max_minutes`, `max_cpu_minutes`). The history records wall
+and CPU seconds (this process and its data-loader workers).
 
     conesight-train-detector --config training/configs/detector.yaml
     conesight-train-detector --config training/configs/detector.yaml --resume
@@ -15,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import copy
 import json
 import math
 import resource
@@ -79,16 +81,52 @@ def cpu_seconds() -> float:
     return total
 
 
-def lr_factor(step: int, config: TrainConfig, elapsed_s: float = 0.0) -> float:
+def lr_factor(step: int, config: TrainConfig, elapsed_s: float = 0.0, cpu_s: float = 0.0) -> float:
     """Linear warm-up, then cosine decay to 5 % over the run: over the steps, or over the
-    wall-clock budget (`max_minutes`) when that runs out first, so a run stopped by its budget
-    still ends on a small learning rate."""
+    wall-clock or CPU budget (`max_minutes`, `max_cpu_minutes`) when one runs out first, so a
+    run stopped by its budget still ends on a small learning rate."""
     if step < config.warmup_steps:
         return (step + 1) / config.warmup_steps
     progress = (step - config.warmup_steps) / max(1, config.steps - config.warmup_steps)
     if config.max_minutes > 0:
         progress = max(progress, elapsed_s / (60 * config.max_minutes))
+    if config.max_cpu_minutes > 0:
+        progress = max(progress, cpu_s / (60 * config.max_cpu_minutes))
     return 0.05 + 0.95 * 0.5 * (1 + math.cos(math.pi * min(1.0, progress)))
+
+
+def over_budget(config: TrainConfig, wall_s: float, cpu_s: float) -> bool:
+    """Whether the run has used its wall-clock or CPU budget."""
+    return (config.max_minutes > 0 and wall_s >= 60 * config.max_minutes) or (
+        config.max_cpu_minutes > 0 and cpu_s >= 60 * config.max_cpu_minutes
+    )
+
+
+class WeightAverage:
+    """Exponential moving average of a model's floating-point weights and buffers (the
+    batch-norm statistics among them), with the decay ramped up from 0 as in Ultralytics'
+    ModelEMA: decay (1 - exp(-updates / ramp_steps)), so the early, fast-moving weights are not
+    averaged in for long."""
+
+    def __init__(self, model: torch.nn.Module, decay: float, ramp_steps: int) -> None:
+        self.model = copy.deepcopy(model).eval()
+        for parameter in self.model.parameters():
+            parameter.requires_grad_(False)
+        self.decay = decay
+        self.ramp_steps = max(1, ramp_steps)
+        self.updates = 0
+
+    @torch.no_grad()
+    def update(self, model: torch.nn.Module) -> None:
+        """One step of the average towards `model`'s current weights."""
+        self.updates += 1
+        d = self.decay * (1.0 - math.exp(-self.updates / self.ramp_steps))
+        live = model.state_dict()
+        for name, value in self.model.state_dict().items():
+            if value.dtype.is_floating_point:
+                value.mul_(d).add_(live[name].detach(), alpha=1.0 - d)
+            else:
+                value.copy_(live[name])
 
 
 def validate(model: ConeDetector, config: TrainConfig) -> dict[str, object]:
@@ -129,13 +167,21 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True) -> d
     )
     step, best_map, history = 0, -1.0, []
     wall_used, cpu_used = 0.0, 0.0
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), cpu_seconds()
     scheduler = torch.optim.lr_scheduler.LambdaLR(
-        optimizer, lambda s: lr_factor(s, config, time.perf_counter() - t0)
+        optimizer,
+        lambda s: lr_factor(s, config, time.perf_counter() - t0, cpu_seconds() - c0),
     )
+    ema = None
+    if config.ema_decay > 0:
+        ema = WeightAverage(model, config.ema_decay, config.ema_ramp_steps)
     if resume and (out / "last.pt").is_file():
         state = load_checkpoint(out / "last.pt")
-        model.load_state_dict(state["model_state"])
+        # With averaging, model_state holds the average and train_model_state the live weights.
+        model.load_state_dict(state.get("train_model_state", state["model_state"]))
+        if ema is not None:
+            ema.model.load_state_dict(state["model_state"])
+            ema.updates = state.get("ema_updates", state["step"])
         optimizer.load_state_dict(state["optimizer_state"])
         scheduler.load_state_dict(state["scheduler_state"])
         step, best_map, history = state["step"], state["best_map50"], state["history"]
@@ -163,12 +209,15 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True) -> d
         )
         for images, targets in loader:
             model.train()
-            heat, reg = model(images.contiguous(memory_format=torch.channels_last))
-            loss = detector_loss(heat, reg, targets, config.loss)
+            with torch.autocast("cpu", dtype=torch.bfloat16, enabled=config.bf16):
+                heat, reg = model(images.contiguous(memory_format=torch.channels_last))
+            loss = detector_loss(heat.float(), reg.float(), targets, config.loss)
             optimizer.zero_grad(set_to_none=True)
             loss.total.backward()
             torch.nn.utils.clip_grad_norm_(model.parameters(), 10.0)
             optimizer.step()
+            if ema is not None:
+                ema.update(model)
             scheduler.step()
             step += 1
             wall, cpu = time.perf_counter() - t0, cpu_seconds() - c0
@@ -184,14 +233,15 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True) -> d
             )
             bar.update(1)
             bar.set_postfix(loss=f"{history[-1][1]:.3f}", heat=f"{history[-1][2]:.3f}")
-            over_budget = config.max_minutes > 0 and wall >= 60 * config.max_minutes
-            last = step >= config.steps or over_budget
+            spent = over_budget(config, wall, cpu)
+            last = step >= config.steps or spent
             if step % config.val_every == 0 or last:
-                metrics = validate(model, config) if config.val else {}
+                evaluated = ema.model if ema is not None else model
+                metrics = validate(evaluated, config) if config.val else {}
                 m = float(metrics.get("map50", float("nan")))  # type: ignore[arg-type]
                 state = {
                     "config": config.to_dict(),
-                    "model_state": model.state_dict(),
+                    "model_state": evaluated.state_dict(),
                     "optimizer_state": optimizer.state_dict(),
                     "scheduler_state": scheduler.state_dict(),
                     "step": step,
@@ -200,18 +250,25 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True) -> d
                     "wall_s": time.perf_counter() - t0,
                     "cpu_s": cpu_seconds() - c0,
                 }
+                if ema is not None:
+                    state["train_model_state"] = model.state_dict()
+                    state["ema_updates"] = ema.updates
                 if not np.isnan(m) and m > best_map:
                     best_map = m
                     save_checkpoint(out / "best.pt", {**state, "best_map50": best_map})
                 save_checkpoint(out / "last.pt", {**state, "best_map50": best_map})
-                slim = {k: v for k, v in state.items() if k != "optimizer_state"}
+                slim = {
+                    k: v
+                    for k, v in state.items()
+                    if k not in ("optimizer_state", "train_model_state")
+                }
                 save_checkpoint(out / "steps" / f"{step:06d}.pt", {**slim, "best_map50": best_map})
                 tqdm.write(
                     f"step {step} ({wall / 60:.1f} min wall, {cpu / 60:.1f} min CPU): val mAP@0.5 "
                     f"{m:.3f}, P {metrics.get('precision')}, R {metrics.get('recall')}"
                 )
             if last:
-                stop = over_budget
+                stop = spent
                 break
     bar.close()
     return {
@@ -230,6 +287,7 @@ def parse_args(argv: list[str] | None) -> tuple[TrainConfig, bool]:
     parser.add_argument("--val")
     parser.add_argument("--init-from")
     parser.add_argument("--max-minutes", type=float)
+    parser.add_argument("--max-cpu-minutes", type=float)
     parser.add_argument("--out")
     parser.add_argument("--steps", type=int)
     parser.add_argument("--batch-size", type=int)
@@ -251,6 +309,7 @@ def parse_args(argv: list[str] | None) -> tuple[TrainConfig, bool]:
         "val",
         "init_from",
         "max_minutes",
+        "max_cpu_minutes",
         "out",
         "steps",
         "batch_size",
