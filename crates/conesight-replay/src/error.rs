@@ -23,7 +23,7 @@ pub enum ReplayError {
         /// The file.
         path: PathBuf,
     },
-    /// The file is damaged before its end (a truncated end is only a warning).
+    /// A finished file (footer intact) is damaged (a file cut short is only a warning).
     #[error(
         "{path} is damaged at byte {offset}: {source} (messages before it can be read; cut the \
          file there or re-record it)"

@@ -4,8 +4,9 @@
 //!
 //! Every channel's schema must be a conesight message (`conesight.v1.ImageFrame`, ...: the
 //! names `conesight_record::message_name` gives), which tells the [`Stream`] of the channel.
-//! A file cut short (the recorder was killed) gives every message before the cut and
-//! reports itself as truncated; damage before the end is an error.
+//! A file cut short (the recorder was killed: no footer) gives every message before the cut,
+//! or before the unfinished chunk it ends with, and reports itself as truncated; damage in a
+//! finished file is an error.
 
 use std::collections::{BTreeMap, HashMap};
 use std::fs::File;
@@ -139,6 +140,20 @@ impl McapFile {
         &self.state.metadata
     }
 
+    /// True when the file ends with the MCAP magic (a finished file; a killed recorder's file
+    /// does not).
+    fn has_footer(&self) -> bool {
+        use std::io::{Seek, SeekFrom};
+        let Ok(mut file) = File::open(&self.path) else {
+            return false;
+        };
+        let mut magic = [0_u8; 8];
+        self.len >= 16
+            && file.seek(SeekFrom::Start(self.len - 8)).is_ok()
+            && file.read_exact(&mut magic).is_ok()
+            && magic == *mcap::MAGIC
+    }
+
     /// The next message in file order; `None` at the end (see [`Self::truncated`]).
     pub fn next_message(&mut self, file: usize) -> Result<Option<RecordedMessage>, ReplayError> {
         while !self.done {
@@ -165,6 +180,23 @@ impl McapFile {
                             messages = self.state.messages,
                             "the recording ends inside a record (the recorder was stopped \
                              abruptly?): every message before the cut was read"
+                        );
+                        break;
+                    }
+                    // A file without its footer was cut short: what stops the reader before
+                    // the end is the chunk that was open, written in place by a writer that
+                    // seeks back to fill in its header (mcap's default, and conesight's
+                    // recorder before it appended chunks whole).
+                    if !self.has_footer() {
+                        self.state.truncated = true;
+                        tracing::warn!(
+                            path = %self.path.display(),
+                            messages = self.state.messages,
+                            unread_bytes = self.len - self.state.bytes_read.min(self.len),
+                            error = %source,
+                            "the recording has no footer and stops at an unfinished record \
+                             (the recorder was stopped abruptly while a chunk was open?): every \
+                             message before it was read, the bytes after it were not"
                         );
                         break;
                     }

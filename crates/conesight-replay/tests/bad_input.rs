@@ -178,3 +178,97 @@ fn a_truncated_file_gives_every_message_of_its_closed_chunks() {
     assert!(!run.truncated);
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A file `mcap`'s default writer left when killed with a chunk open: the chunk is written in
+/// place (a placeholder header, then the compressed data as zstd emits it), as conesight's
+/// recorder did before it appended chunks whole. Recordings made then still read.
+#[test]
+fn a_file_killed_inside_a_chunk_written_in_place_reads_as_truncated() {
+    let dir = dir("in-place");
+    let path = dir.join("killed.mcap");
+    let file = std::fs::File::create(&path).unwrap();
+    let mut writer = mcap::WriteOptions::new()
+        .compression(Some(mcap::Compression::Zstd))
+        .compression_threads(0)
+        .chunk_size(Some(8 << 20))
+        .create(file)
+        .unwrap();
+    let schema = writer
+        .add_schema(
+            conesight_record::message_name(Stream::Cones),
+            conesight_record::SCHEMA_ENCODING,
+            conesight_proto::FILE_DESCRIPTOR_SET,
+        )
+        .unwrap();
+    let channel = writer
+        .add_channel(
+            schema,
+            "conesight/x/car/front/cones",
+            conesight_record::MESSAGE_ENCODING,
+            &BTreeMap::new(),
+        )
+        .unwrap();
+    let write = |writer: &mut mcap::Writer<std::fs::File>, sequence: u64, data: &[u8]| {
+        let header = mcap::records::MessageHeader {
+            channel_id: channel,
+            sequence: sequence as u32,
+            log_time: 1_000 + sequence,
+            publish_time: 1_000 + sequence,
+        };
+        writer.write_to_known_channel(&header, data).unwrap();
+    };
+    for sequence in 0..100 {
+        write(&mut writer, sequence, &cones(sequence));
+    }
+    // Closes the chunk: 100 messages are on disk for good.
+    writer.flush().unwrap();
+    // One large incompressible message: zstd emits blocks of it into the open chunk.
+    let mut state = 0x2545_F491_4F6C_DD1D_u64;
+    let noise: Vec<u8> = (0..(400 << 10))
+        .map(|_| {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state as u8
+        })
+        .collect();
+    write(&mut writer, 100, &noise);
+    // kill -9: nothing more reaches the file.
+    std::mem::forget(writer);
+    let len = std::fs::metadata(&path).unwrap().len();
+    assert!(
+        len > 256 << 10,
+        "zstd emitted the open chunk's data: {len} bytes"
+    );
+
+    let mut recording = Recording::open(std::slice::from_ref(&path)).unwrap();
+    let mut sequences = Vec::new();
+    while let Some(message) = recording.next_message().unwrap() {
+        sequences.push(
+            pb::Cones::decode(&message.data[..])
+                .unwrap()
+                .header
+                .unwrap()
+                .frame_sequence,
+        );
+    }
+    assert_eq!(sequences, (0..100).collect::<Vec<_>>());
+    assert_eq!(recording.truncated(), vec![path.clone()]);
+
+    // The same damage in a finished file (its footer intact) is an error naming the file.
+    let finished = dir.join("finished.mcap");
+    write_recording(&finished, 400, 4096);
+    let mut bytes = std::fs::read(&finished).unwrap();
+    let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
+    let chunk = &summary.chunk_indexes[1];
+    // The chunk's compressed size as the placeholder a killed in-place writer leaves.
+    let at = (chunk.chunk_start_offset + 9 + 8 + 8 + 8 + 4 + 4 + 4) as usize;
+    bytes[at..at + 8].copy_from_slice(&u64::MAX.to_le_bytes());
+    std::fs::write(&finished, &bytes).unwrap();
+    let message = open_error(&finished);
+    assert!(
+        message.contains("finished.mcap") && message.contains("damaged"),
+        "{message}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
