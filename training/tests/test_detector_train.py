@@ -157,3 +157,35 @@ def test_averaged_run_checkpoints_the_average_and_resumes_the_live_weights(tmp_p
     resumed = train(config, resume=True, progress=False)
     assert resumed["steps"] == 6
     assert load_checkpoint(tmp_path / "last.pt")["ema_updates"] == 6
+
+
+def test_curve_chains_continued_runs_and_starts_independent_ones_at_zero(tmp_path):
+    import json
+
+    from conesight_train.detector import curve
+
+    runs = []
+    for name in ("a", "b"):
+        train(tiny_run("toy:8", "toy:2:9", tmp_path / name, steps=2), progress=False)
+        runs += ["--run", str(tmp_path / name)]
+    chained, independent = tmp_path / "chained.json", tmp_path / "independent.json"
+    png = tmp_path / "curve.png"
+    curve.main([*runs, "--data", "toy:2:9", "--json", str(chained), "--png", str(png)])
+    curve.main([*runs, "--independent", "--data", "toy:2:9", "--json", str(independent)])
+    c = json.loads(chained.read_text())["points"]
+    i = json.loads(independent.read_text())["points"]
+    assert [p["step"] for p in c] == [2, 4] and [p["step"] for p in i] == [2, 2]
+    assert c[1]["cpu_min"] == pytest.approx(c[0]["cpu_min"] + i[1]["cpu_min"])
+    assert png.stat().st_size > 0
+    # Earlier points are drawn again without evaluating their runs.
+    both = tmp_path / "both.json"
+    curve.main(["--add-json", str(chained), "--add-json", str(independent), "--json", str(both)])
+    assert json.loads(both.read_text())["points"] == c + i
+    # Points kept with fewer measures (no recall) still draw, and their peers come along.
+    sparse = tmp_path / "sparse.json"
+    kept = [{k: p[k] for k in ("run", "step", "cpu_min", "map50")} for p in c]
+    sparse.write_text(json.dumps({"points": kept, "peers": [["peer", 0.2]]}))
+    redrawn, png2 = tmp_path / "redrawn.json", tmp_path / "sparse.png"
+    curve.main(["--add-json", str(sparse), "--json", str(redrawn), "--png", str(png2)])
+    assert json.loads(redrawn.read_text())["peers"] == [["peer", 0.2]]
+    assert png2.stat().st_size > 0

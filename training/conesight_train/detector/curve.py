@@ -1,7 +1,9 @@
 """The learning curve of detector runs: every per-validation checkpoint (`OUT/steps/*.pt`) of one
 or more runs, evaluated on a labelled split, against the training time it had used (wall and
 CPU minutes, the CPU of the run's process and its data workers), as JSON and a plot. Runs that
-continue another (`init_from`) are drawn after it on the time axis.
+continue another (`init_from`) are drawn after it on the time axis; `--independent` draws each
+run from zero instead (different recipes or data mixes side by side). `--add-json` draws the
+points of an earlier run of this command too, without evaluating them again.
 
     python -m conesight_train.detector.curve --run build/train/detector \\
         --data yolo:../shared/data/real-train/fsoco-boxes/test \\
@@ -65,18 +67,28 @@ def plot(points: list[dict[str, float]], peers: list[tuple[str, float]], out: Pa
         ax.plot(
             [p["cpu_min"] for p in mine], [p["map50"] for p in mine], "o-", label=f"{run}: mAP@0.5"
         )
-        ax.plot(
-            [p["cpu_min"] for p in mine],
-            [p["recall_at_least_20px"] for p in mine],
-            "s--",
-            alpha=0.6,
-            label=f"{run}: recall of cones >= 20 px",
-        )
+        # Points kept from an earlier run of this command may lack the other measures.
+        if all("recall_at_least_20px" in p for p in mine):
+            ax.plot(
+                [p["cpu_min"] for p in mine],
+                [p["recall_at_least_20px"] for p in mine],
+                "s--",
+                alpha=0.6,
+                label=f"{run}: recall of cones >= 20 px",
+            )
+        if all(p.get("val_map50", float("nan")) == p.get("val_map50") for p in mine):  # no NaN
+            ax.plot(
+                [p["cpu_min"] for p in mine],
+                [p["val_map50"] for p in mine],
+                ".:",
+                alpha=0.6,
+                label=f"{run}: mAP@0.5 on the valid split",
+            )
     for name, value in peers:
         ax.axhline(value, color="black", lw=1.0, ls="--", label=f"{name}: mAP@0.5")
     ax.axhline(0.85, color="grey", lw=0.8, ls=":", label="target mAP@0.5 0.85")
     ax.set_xlabel("training CPU minutes (process and data workers)")
-    ax.set_ylabel("on the real test split")
+    ax.set_ylabel("on the real test split (valid where marked)")
     ax.set_ylim(0, 1)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, loc="lower right")
@@ -90,30 +102,51 @@ def plot(points: list[dict[str, float]], peers: list[tuple[str, float]], out: Pa
 def main(argv: list[str] | None = None) -> None:
     """CLI entry point."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--run", type=Path, action="append", required=True)
-    parser.add_argument("--data", required=True)
+    parser.add_argument("--run", type=Path, action="append", default=[])
+    parser.add_argument(
+        "--add-json",
+        type=Path,
+        action="append",
+        default=[],
+        help="points written by an earlier --json of this command, drawn first",
+    )
+    parser.add_argument("--data", help="labelled frames to evaluate the --run checkpoints on")
     parser.add_argument("--json", type=Path)
     parser.add_argument("--png", type=Path)
     parser.add_argument("--peer", action="append", default=[], help="NAME=MAP")
     parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument(
+        "--independent",
+        action="store_true",
+        help="each --run starts at zero CPU minutes (default: each continues the one before)",
+    )
     args = parser.parse_args(argv)
     import torch
 
     torch.set_num_threads(args.threads)
+    if not args.run and not args.add_json:
+        parser.error("give at least one --run or --add-json")
+    if args.run and not args.data:
+        parser.error("--run needs --data")
     points: list[dict[str, float]] = []
+    peers = []
+    for path in args.add_json:
+        earlier = json.loads(path.read_text(encoding="utf-8"))
+        points += earlier["points"]
+        peers += [(name, float(value)) for name, value in earlier.get("peers", [])]
     offset = (0.0, 0.0, 0)
     for run in args.run:
         mine = run_points(run, args.data, offset)
         points += mine
-        if mine:  # the next run continues this one
+        if mine and not args.independent:  # the next run continues this one
             last = mine[-1]
             offset = (last["wall_min"] * 60, last["cpu_min"] * 60, int(last["step"]))
     for p in points:
+        recall = p.get("recall_at_least_20px", float("nan"))
         print(
             f"{p['run']} step {p['step']}: {p['cpu_min']:.0f} CPU min, mAP@0.5 {p['map50']:.3f}, "
-            f"recall >= 20 px {p['recall_at_least_20px']:.3f} (val mAP {p['val_map50']:.3f})"
+            f"recall >= 20 px {recall:.3f} (val mAP {p.get('val_map50', float('nan')):.3f})"
         )
-    peers = []
     for spec in args.peer:
         name, _, value = spec.partition("=")
         peers.append((name, float(value)))

@@ -15,6 +15,7 @@ recall by distance band and within 20 m (rendered frames, which have ranges: con
 see `metrics.py`), recall by box height (< 20, 20-40, >= 40 px); then the same over all ranges.
 Real frames have no ranges: every labelled cone counts (`unknown_cone` is an ignore region).
 Drawn PNGs show each detection (class colour, score) and, when labelled, missed truths (white).
+`--iou-sweep 0.3,0.5` repeats mAP and recall at other IoU thresholds (JSON `iou_sweep`).
 `--shift F` moves every frame down by F of its height (up when negative; the uncovered rows
 grey), as a camera pitched up (down) would see it, with no calibration given.
 """
@@ -216,6 +217,11 @@ def main(argv: list[str] | None = None) -> None:
         "--score-sweep",
         help="comma-separated score thresholds: precision, recall and F1 at each (working range)",
     )
+    parser.add_argument(
+        "--iou-sweep",
+        help="comma-separated IoU thresholds: mAP and recall at each (working range), to tell "
+        "boxes placed a little off from cones not found",
+    )
     args = parser.parse_args(argv)
     torch.set_num_threads(args.threads)
     if args.checkpoint:
@@ -248,6 +254,13 @@ def main(argv: list[str] | None = None) -> None:
                 sweep[f"{t:g}"] = {"precision": p, "recall": r, "f1": f1}
                 print(f"  score >= {t:g}: precision {p:.3f}  recall {r:.3f}  F1 {f1:.3f}")
             report["score_sweep"] = sweep
+        if args.iou_sweep:
+            by_iou = {}
+            for t in (float(v) for v in args.iou_sweep.split(",")):
+                m = evaluate(results, CLASS_NAMES, thresholds.score_threshold, iou_threshold=t)
+                by_iou[f"{t:g}"] = {"map": m["map50"], "recall": m["recall"]}
+                print(f"  IoU >= {t:g}: mAP {m['map50']:.3f}  recall {m['recall']:.3f}")
+            report["iou_sweep"] = by_iou
     else:
         frames = unlabelled_frames(args.images)[: args.limit]
         results = run_frames(frames, runner, input_params, thresholds, args.png, args.png_count)
