@@ -46,6 +46,16 @@ fn write_recording(path: &Path, count: u64, chunk_bytes: u64) {
     sink.finish().unwrap();
 }
 
+/// The frame sequence of every cones message, in file order.
+fn cone_sequences(recording: &mut Recording) -> Vec<u64> {
+    let mut sequences = Vec::new();
+    while let Some(message) = recording.next_message().unwrap() {
+        let cones = pb::Cones::decode(&message.data[..]).unwrap();
+        sequences.push(cones.header.unwrap().frame_sequence);
+    }
+    sequences
+}
+
 fn open_error(path: &Path) -> String {
     match Recording::open(&[path.to_path_buf()]).and_then(|mut r| {
         while r.next_message()?.is_some() {}
@@ -159,16 +169,7 @@ fn a_truncated_file_gives_every_message_of_its_closed_chunks() {
     )
     .unwrap();
     let mut recording = Recording::open(std::slice::from_ref(&cut)).unwrap();
-    let mut sequences = Vec::new();
-    while let Some(message) = recording.next_message().unwrap() {
-        sequences.push(
-            pb::Cones::decode(&message.data[..])
-                .unwrap()
-                .header
-                .unwrap()
-                .frame_sequence,
-        );
-    }
+    let sequences = cone_sequences(&mut recording);
     assert!(sequences.len() >= before, "{} of {before}", sequences.len());
     assert_eq!(sequences, (0..sequences.len() as u64).collect::<Vec<_>>());
     assert_eq!(recording.truncated(), vec![cut.clone()]);
@@ -242,16 +243,7 @@ fn a_file_killed_inside_a_chunk_written_in_place_reads_as_truncated() {
     );
 
     let mut recording = Recording::open(std::slice::from_ref(&path)).unwrap();
-    let mut sequences = Vec::new();
-    while let Some(message) = recording.next_message().unwrap() {
-        sequences.push(
-            pb::Cones::decode(&message.data[..])
-                .unwrap()
-                .header
-                .unwrap()
-                .frame_sequence,
-        );
-    }
+    let sequences = cone_sequences(&mut recording);
     assert_eq!(sequences, (0..100).collect::<Vec<_>>());
     assert_eq!(recording.truncated(), vec![path.clone()]);
 

@@ -67,23 +67,16 @@ def plot(points: list[dict[str, float]], peers: list[tuple[str, float]], out: Pa
         ax.plot(
             [p["cpu_min"] for p in mine], [p["map50"] for p in mine], "o-", label=f"{run}: mAP@0.5"
         )
-        # Points kept from an earlier run of this command may lack the other measures.
-        if all("recall_at_least_20px" in p for p in mine):
-            ax.plot(
-                [p["cpu_min"] for p in mine],
-                [p["recall_at_least_20px"] for p in mine],
-                "s--",
-                alpha=0.6,
-                label=f"{run}: recall of cones >= 20 px",
-            )
-        if all(p.get("val_map50", float("nan")) == p.get("val_map50") for p in mine):  # no NaN
-            ax.plot(
-                [p["cpu_min"] for p in mine],
-                [p["val_map50"] for p in mine],
-                ".:",
-                alpha=0.6,
-                label=f"{run}: mAP@0.5 on the valid split",
-            )
+        # Points kept from an earlier run of this command may lack the other measures (or
+        # hold NaN for them): such a line is left out.
+        for key, style, what in (
+            ("recall_at_least_20px", "s--", "recall of cones >= 20 px"),
+            ("val_map50", ".:", "mAP@0.5 on the valid split"),
+        ):
+            values = [float(p.get(key, float("nan"))) for p in mine]
+            if all(v == v for v in values):
+                cpu = [p["cpu_min"] for p in mine]
+                ax.plot(cpu, values, style, alpha=0.6, label=f"{run}: {what}")
     for name, value in peers:
         ax.axhline(value, color="black", lw=1.0, ls="--", label=f"{name}: mAP@0.5")
     ax.axhline(0.85, color="grey", lw=0.8, ls=":", label="target mAP@0.5 0.85")
