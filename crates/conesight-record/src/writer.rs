@@ -3,10 +3,10 @@
 //! The writer goes straight to the file (no user-space buffer): a chunk is compressed in
 //! memory while it fills (at most `chunk_bytes` plus one message) and appended to the file
 //! whole when it closes, so after a `kill -9` every closed chunk is on disk and readable; only
-//! the open chunk and the summary are lost. (`mcap`'s default writes a chunk in place instead:
-//! a placeholder header, the compressed data as zstd emits it, then a seek back to fill in the
-//! header. A kill in between leaves a header no reader can get past, so seeking is off.) Chunks also close every `flush_interval`, so at a low
-//! message rate little is lost either.
+//! the open chunk and the summary are lost. Chunks also close every `flush_interval`, so at a
+//! low message rate little is lost either. (`mcap`'s default writes a chunk in place instead: a
+//! placeholder header, the compressed data as zstd emits it, then a seek back to fill in the
+//! header. A kill in between leaves a header no reader can get past, so seeking is off.)
 
 use std::collections::{BTreeMap, HashMap};
 use std::fs::File;

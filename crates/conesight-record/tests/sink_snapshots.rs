@@ -8,6 +8,8 @@ use conesight_bus::Stream;
 use conesight_record::{McapSink, SinkOptions};
 use mcap::records::op;
 use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
+use rand::{RngCore, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 
 /// Messages in `bytes`, read strictly: any record cut short or left unfinished is an error.
 fn strict_messages(bytes: &[u8]) -> Result<u64, mcap::McapError> {
@@ -29,17 +31,11 @@ fn strict_messages(bytes: &[u8]) -> Result<u64, mcap::McapError> {
     Ok(messages)
 }
 
-/// Incompressible bytes (xorshift), so zstd emits blocks while a chunk fills.
+/// Incompressible bytes, so zstd emits blocks while a chunk fills.
 fn noise(len: usize, seed: u64) -> Vec<u8> {
-    let mut state = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
-    (0..len)
-        .map(|_| {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            state as u8
-        })
-        .collect()
+    let mut bytes = vec![0; len];
+    ChaCha8Rng::seed_from_u64(seed).fill_bytes(&mut bytes);
+    bytes
 }
 
 #[test]

@@ -9,6 +9,8 @@ use conesight_bus::Stream;
 use conesight_proto::{Message, pb};
 use conesight_record::{McapSink, SinkOptions};
 use conesight_replay::{Recording, ReplayError, read_cones};
+use rand::{RngCore, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 
 fn dir(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("conesight-replay-{name}-{}", std::process::id()));
@@ -224,15 +226,8 @@ fn a_file_killed_inside_a_chunk_written_in_place_reads_as_truncated() {
     // Closes the chunk: 100 messages are on disk for good.
     writer.flush().unwrap();
     // One large incompressible message: zstd emits blocks of it into the open chunk.
-    let mut state = 0x2545_F491_4F6C_DD1D_u64;
-    let noise: Vec<u8> = (0..(400 << 10))
-        .map(|_| {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            state as u8
-        })
-        .collect();
+    let mut noise = vec![0; 400 << 10];
+    ChaCha8Rng::seed_from_u64(7).fill_bytes(&mut noise);
     write(&mut writer, 100, &noise);
     // kill -9: nothing more reaches the file.
     std::mem::forget(writer);
