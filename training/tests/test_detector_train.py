@@ -189,3 +189,30 @@ def test_curve_chains_continued_runs_and_starts_independent_ones_at_zero(tmp_pat
     curve.main(["--add-json", str(sparse), "--json", str(redrawn), "--png", str(png2)])
     assert json.loads(redrawn.read_text())["peers"] == [["peer", 0.2]]
     assert png2.stat().st_size > 0
+
+
+def test_a_checkpoint_exports_and_evaluates_at_another_input_size(tmp_path, capsys):
+    from conesight_train.detector import evaluate, onnx_export
+
+    train(tiny_run("toy:4", "toy:2:9", tmp_path / "run"), progress=False)
+    checkpoint = tmp_path / "run" / "last.pt"
+    out = tmp_path / "big" / "det.onnx"
+    onnx_export.main(
+        ["--checkpoint", str(checkpoint), "--out", str(out), "--input-size", "192x160"]
+    )
+    dims = onnx.load(str(out)).graph.input[0].type.tensor_type.shape.dim
+    assert [d.dim_value for d in dims] == [1, 3, 160, 192]
+    meta = {p.key: p.value for p in onnx.load(str(out)).metadata_props}
+    assert meta["imgsz"] == "[160, 192]"
+    _, params, _ = evaluate.torch_runner(checkpoint, evaluate.input_size_arg("192x160"))
+    assert (params.input_width_px, params.input_height_px) == (192, 160)
+    # The ONNX file's input is fixed: the flag is refused with the reason.
+    with pytest.raises(SystemExit, match="fixed input"):
+        evaluate.main(["--onnx", str(out), "--data", "toy:2", "--input-size", "192x160"])
+    for bad in ("192", "192x150", "axb"):
+        with pytest.raises(SystemExit):
+            onnx_export.main(
+                ["--checkpoint", str(checkpoint), "--out", str(out), "--input-size", bad]
+            )
+        err = capsys.readouterr().err
+        assert "--input-size" in err and ("WIDTHxHEIGHT" in err or "multiples of 32" in err), err

@@ -3,9 +3,11 @@
 //!
 //! ```text
 //! cargo run --release -p conesight-detect --example detect_speed -- MODEL.onnx [FRAME.png] \
-//!     [--threads N] [--frames N] [--list]
+//!     [--threads N] [--frames N] [--list] [--no-spin]
 //! ```
-//! `--list` prints the detections (class, score, box in frame pixels).
+//! `--list` prints the detections (class, score, box in frame pixels). `--no-spin` turns off
+//! ONNX Runtime's busy-waiting idle threads (as the services on a shared machine run it), so
+//! the two-thread preprocessing gets the second core.
 //! Without a frame it uses a 1920x1200 noise frame. A random-init model of the shipped size
 //! comes from `python -m conesight_train.detector.speed --save build/detector-random.onnx`.
 
@@ -23,12 +25,14 @@ fn main() -> anyhow::Result<()> {
     let mut threads = 1usize;
     let mut frames = 30usize;
     let mut list = false;
+    let mut spinning = None;
     let mut args = std::env::args().skip(1);
     while let Some(arg) = args.next() {
         match arg.as_str() {
             "--threads" => threads = args.next().context("--threads N")?.parse()?,
             "--frames" => frames = args.next().context("--frames N")?.parse()?,
             "--list" => list = true,
+            "--no-spin" => spinning = Some(false),
             _ if model.is_none() => model = Some(PathBuf::from(arg)),
             _ if frame_path.is_none() => frame_path = Some(PathBuf::from(arg)),
             _ => bail!("unexpected argument {arg}"),
@@ -38,6 +42,7 @@ fn main() -> anyhow::Result<()> {
     let config = DetectorConfig {
         onnx: ModelOptions {
             intra_threads: Some(threads),
+            allow_spinning: spinning,
             ..ModelOptions::default()
         },
         ..DetectorConfig::default()

@@ -23,7 +23,7 @@ use image::{ImageBuffer, Rgb};
 
 use crate::card::FrameInputParams;
 use crate::error::DetectError;
-use crate::resize::resize_rgb;
+use crate::resize::resize_rgb_into_planes;
 
 /// Ultralytics' letterbox padding value (0..255), also conesight's fill.
 pub const LETTERBOX_FILL: f32 = 114.0;
@@ -87,15 +87,7 @@ pub fn frame_input<C: Deref<Target = [u8]>>(
     // An integer factor (1920x1200 into 960x608: 2) is the k x k block mean, straight into
     // the planes; any other size goes through the general resampler.
     if !block_mean_into(frame.as_raw(), (w, h), (rw, rh), w_in, plane, &mut data) {
-        let resized = resize_rgb(frame.as_raw(), w, h, rw, rh);
-        for y in 0..rh {
-            let row = &resized[y * rw * 3..(y + 1) * rw * 3];
-            for (x, px) in row.chunks_exact(3).enumerate() {
-                data[y * w_in + x] = px[0];
-                data[plane + y * w_in + x] = px[1];
-                data[2 * plane + y * w_in + x] = px[2];
-            }
-        }
+        resize_rgb_into_planes(frame.as_raw(), (w, h), (rw, rh), w_in, &mut data);
     }
     let mapping = InputMapping {
         pad_x: 0.0,
@@ -242,6 +234,7 @@ pub fn letterbox_input<C: Deref<Target = [u8]>>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::resize::resize_rgb;
     use image::RgbImage;
 
     fn gradient(width: u32, height: u32) -> RgbImage {

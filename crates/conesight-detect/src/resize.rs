@@ -66,41 +66,211 @@ fn linear_taps(src_len: usize, dst_len: usize) -> Taps {
         .collect()
 }
 
+/// [`Taps`] in a flat layout: output `d` reads the `k` input pixels from `starts[d]` with
+/// `weights[d * k..(d + 1) * k]` (taps in their original order; shorter lists padded with
+/// zero weights on valid pixels, which leave every sum bit for bit as it was).
+struct FlatTaps {
+    starts: Vec<usize>,
+    weights: Vec<f32>,
+    k: usize,
+}
+
+impl FlatTaps {
+    fn new(taps: &Taps, src_len: usize) -> Self {
+        let k = taps.iter().map(Vec::len).max().unwrap_or(0).max(1);
+        let mut starts = Vec::with_capacity(taps.len());
+        let mut weights = vec![0.0f32; taps.len() * k];
+        for (d, list) in taps.iter().enumerate() {
+            // Area and linear taps are runs of consecutive pixels; the window slides left at
+            // the right edge so the padding stays inside the row.
+            let first = list.first().map_or(0, |t| t.0);
+            let start = first.min(src_len.saturating_sub(k));
+            starts.push(start);
+            for &(s, w) in list {
+                weights[d * k + (s - start)] = w;
+            }
+        }
+        Self { starts, weights, k }
+    }
+}
+
 /// Resizes interleaved RGB8 (`width x height`, row stride `width * 3`) to `dst_w x dst_h`
 /// interleaved `f32` values, rows first then columns (separable), each value rounded to the
 /// nearest integer as the training's uint8 images are.
 pub fn resize_rgb(raw: &[u8], width: usize, height: usize, dst_w: usize, dst_h: usize) -> Vec<f32> {
-    let x_taps = axis_taps(width, dst_w);
-    let y_taps = axis_taps(height, dst_h);
-    // Horizontal pass for every input row: height x dst_w x 3.
-    let mut rows = vec![0.0f32; height * dst_w * 3];
-    for y in 0..height {
-        let src = &raw[y * width * 3..(y + 1) * width * 3];
-        let dst = &mut rows[y * dst_w * 3..(y + 1) * dst_w * 3];
-        for (x, taps) in x_taps.iter().enumerate() {
-            let mut acc = [0.0f32; 3];
-            for &(s, w) in taps {
-                acc[0] += f32::from(src[s * 3]) * w;
-                acc[1] += f32::from(src[s * 3 + 1]) * w;
-                acc[2] += f32::from(src[s * 3 + 2]) * w;
-            }
-            dst[x * 3..x * 3 + 3].copy_from_slice(&acc);
-        }
-    }
-    let mut out = vec![0.0f32; dst_h * dst_w * 3];
-    for (y, taps) in y_taps.iter().enumerate() {
-        let dst = &mut out[y * dst_w * 3..(y + 1) * dst_w * 3];
-        for &(s, w) in taps {
-            let src = &rows[s * dst_w * 3..(s + 1) * dst_w * 3];
-            for (d, v) in dst.iter_mut().zip(src) {
-                *d += v * w;
-            }
-        }
-        for d in dst.iter_mut() {
-            *d = (*d + 0.5).floor().clamp(0.0, 255.0);
+    let plane = dst_w * dst_h;
+    let mut planes = vec![0.0f32; 3 * plane];
+    resize_rgb_into_planes(raw, (width, height), (dst_w, dst_h), dst_w, &mut planes);
+    let mut out = vec![0.0f32; 3 * plane];
+    for (i, px) in out.chunks_exact_mut(3).enumerate() {
+        for (c, v) in px.iter_mut().enumerate() {
+            *v = planes[c * plane + i];
         }
     }
     out
+}
+
+/// Output rows per thread below which [`resize_rgb_into_planes`] stays on one thread.
+const MIN_ROWS_PER_THREAD: usize = 128;
+
+/// [`resize_rgb`] written straight into the first `dst_w x dst_h` cells of three planes of
+/// `row_stride`-wide rows (`data`: red, green, blue, each `data.len() / 3` long); the other
+/// cells are left as they are. The same sums in the same order as [`resize_rgb`] always did:
+/// each horizontal sum over its taps, then each vertical sum over its rows. Large outputs are
+/// split into two bands of rows resized on two threads (the detector's 2-core budget).
+pub fn resize_rgb_into_planes(
+    raw: &[u8],
+    (width, height): (usize, usize),
+    (dst_w, dst_h): (usize, usize),
+    row_stride: usize,
+    data: &mut [f32],
+) {
+    if dst_w == 0 || dst_h == 0 || width == 0 || height == 0 {
+        return;
+    }
+    let x_taps = FlatTaps::new(&axis_taps(width, dst_w), width);
+    let y_taps = FlatTaps::new(&axis_taps(height, dst_h), height);
+    let input = Input {
+        raw,
+        width,
+        x_taps: &x_taps,
+        y_taps: &y_taps,
+        dst_w,
+        row_stride,
+    };
+    let plane = data.len() / 3;
+    let (red, rest) = data.split_at_mut(plane);
+    let (green, blue) = rest.split_at_mut(plane);
+    if dst_h < 2 * MIN_ROWS_PER_THREAD {
+        input.resize_rows(0..dst_h, [red, green, blue]);
+        return;
+    }
+    let mid = dst_h / 2;
+    let (r0, r1) = red.split_at_mut(mid * row_stride);
+    let (g0, g1) = green.split_at_mut(mid * row_stride);
+    let (b0, b1) = blue.split_at_mut(mid * row_stride);
+    std::thread::scope(|scope| {
+        scope.spawn(|| input.resize_rows(mid..dst_h, [r1, g1, b1]));
+        input.resize_rows(0..mid, [r0, g0, b0]);
+    });
+}
+
+/// What every band of output rows reads.
+struct Input<'a> {
+    raw: &'a [u8],
+    width: usize,
+    x_taps: &'a FlatTaps,
+    y_taps: &'a FlatTaps,
+    dst_w: usize,
+    row_stride: usize,
+}
+
+impl Input<'_> {
+    /// Output rows `rows` into `planes`, whose first row is output row `rows.start`.
+    fn resize_rows(&self, rows: std::ops::Range<usize>, mut planes: [&mut [f32]; 3]) {
+        let (x_taps, y_taps, dst_w, width) = (self.x_taps, self.y_taps, self.dst_w, self.width);
+        // The horizontal sums of the `k` input rows an output row reads, kept in a ring of
+        // `k` slots (input row `s` in slot `s % k`; output rows read non-decreasing windows),
+        // so each input row is summed once per band and the working set stays in cache.
+        let k = y_taps.k;
+        let slot_len = 3 * dst_w;
+        let mut ring = vec![0.0f32; k * slot_len];
+        let mut held: Vec<Option<usize>> = vec![None; k];
+        let mut scratch = vec![0.0f32; 3 * width];
+        let first = rows.start;
+        for y in rows {
+            let start = y_taps.starts[y];
+            for s in start..start + k {
+                let slot = s % k;
+                if held[slot] != Some(s) {
+                    let src = &self.raw[s * width * 3..(s + 1) * width * 3];
+                    let (red, rest) =
+                        ring[slot * slot_len..(slot + 1) * slot_len].split_at_mut(dst_w);
+                    let (green, blue) = rest.split_at_mut(dst_w);
+                    let sums = [red, green, blue];
+                    match x_taps.k {
+                        1 => horizontal::<1>(src, x_taps, &mut scratch, sums),
+                        2 => horizontal::<2>(src, x_taps, &mut scratch, sums),
+                        3 => horizontal::<3>(src, x_taps, &mut scratch, sums),
+                        4 => horizontal::<4>(src, x_taps, &mut scratch, sums),
+                        _ => horizontal_any(src, x_taps, sums),
+                    }
+                    held[slot] = Some(s);
+                }
+            }
+            // Vertical sums, straight into the planes, vectorised along the row.
+            let weights = &y_taps.weights[y * k..(y + 1) * k];
+            for (c, plane) in planes.iter_mut().enumerate() {
+                let dst = &mut plane[(y - first) * self.row_stride..][..dst_w];
+                dst.fill(0.0);
+                for (j, &w) in weights.iter().enumerate() {
+                    let slot = (start + j) % k;
+                    let src = &ring[slot * slot_len + c * dst_w..][..dst_w];
+                    for (d, v) in dst.iter_mut().zip(src) {
+                        *d += v * w;
+                    }
+                }
+                // Round half up and clamp to 0..255 (`floor(v + 0.5)` clamped, as a
+                // saturating cast: v >= 0 here, so truncation is the floor, and it vectorises
+                // where floorf is a libm call).
+                for d in dst.iter_mut() {
+                    *d = f32::from((*d + 0.5) as u8);
+                }
+            }
+        }
+    }
+}
+
+/// One row's horizontal sums with `K` taps per output pixel (known at compile time): the
+/// row split into float channels first, then each channel summed over its taps.
+fn horizontal<const K: usize>(
+    src: &[u8],
+    taps: &FlatTaps,
+    scratch: &mut [f32],
+    planes: [&mut [f32]; 3],
+) {
+    let width = src.len() / 3;
+    let (r_in, rest) = scratch.split_at_mut(width);
+    let (g_in, b_in) = rest.split_at_mut(width);
+    for (((px, r), g), b) in src
+        .chunks_exact(3)
+        .zip(r_in.iter_mut())
+        .zip(g_in.iter_mut())
+        .zip(b_in.iter_mut())
+    {
+        (*r, *g, *b) = (f32::from(px[0]), f32::from(px[1]), f32::from(px[2]));
+    }
+    for (input, out) in [&*r_in, &*g_in, &*b_in].into_iter().zip(planes) {
+        for ((&s, w), o) in taps
+            .starts
+            .iter()
+            .zip(taps.weights.chunks_exact(K))
+            .zip(out.iter_mut())
+        {
+            let px: &[f32; K] = input[s..s + K].try_into().unwrap_or(&[0.0; K]);
+            let mut acc = 0.0f32;
+            for j in 0..K {
+                acc += px[j] * w[j];
+            }
+            *o = acc;
+        }
+    }
+}
+
+/// [`horizontal`] for any number of taps.
+fn horizontal_any(src: &[u8], taps: &FlatTaps, [red, green, blue]: [&mut [f32]; 3]) {
+    let k = taps.k;
+    for (x, &s) in taps.starts.iter().enumerate() {
+        let w = &taps.weights[x * k..(x + 1) * k];
+        let px = &src[s * 3..(s + k) * 3];
+        let mut acc = [0.0f32; 3];
+        for j in 0..k {
+            acc[0] += f32::from(px[j * 3]) * w[j];
+            acc[1] += f32::from(px[j * 3 + 1]) * w[j];
+            acc[2] += f32::from(px[j * 3 + 2]) * w[j];
+        }
+        (red[x], green[x], blue[x]) = (acc[0], acc[1], acc[2]);
+    }
 }
 
 #[cfg(test)]
@@ -136,6 +306,58 @@ mod tests {
             .collect();
         let out = resize_rgb(&raw, 2, 2, 1, 1);
         assert_eq!(out, vec![25.0, 25.0, 25.0]);
+    }
+
+    /// The tap lists summed the plain way (the resampler before the flat layout).
+    fn reference(raw: &[u8], (w, h): (usize, usize), (dw, dh): (usize, usize)) -> Vec<f32> {
+        let (xt, yt) = (axis_taps(w, dw), axis_taps(h, dh));
+        let mut rows = vec![0.0f32; h * dw * 3];
+        for y in 0..h {
+            for (x, taps) in xt.iter().enumerate() {
+                let mut acc = [0.0f32; 3];
+                for &(s, wt) in taps {
+                    for c in 0..3 {
+                        acc[c] += f32::from(raw[(y * w + s) * 3 + c]) * wt;
+                    }
+                }
+                rows[(y * dw + x) * 3..][..3].copy_from_slice(&acc);
+            }
+        }
+        let mut out = vec![0.0f32; dh * dw * 3];
+        for (y, taps) in yt.iter().enumerate() {
+            for &(s, wt) in taps {
+                for i in 0..dw * 3 {
+                    out[y * dw * 3 + i] += rows[s * dw * 3 + i] * wt;
+                }
+            }
+        }
+        out.iter()
+            .map(|v| (v + 0.5).floor().clamp(0.0, 255.0))
+            .collect()
+    }
+
+    #[test]
+    fn the_flat_layout_gives_the_tap_sums_bit_for_bit() {
+        // 3:2 and 4:3 (1920 into 1280 and 1440), odd ratios, one pixel, enlarging; the last
+        // two tall enough for the two-thread split (MIN_ROWS_PER_THREAD).
+        for ((w, h), dst) in [
+            ((61, 37), (40, 25)),
+            ((61, 37), (45, 27)),
+            ((61, 37), (17, 11)),
+            ((61, 37), (1, 1)),
+            ((61, 37), (61, 37)),
+            ((61, 37), (90, 50)),
+            ((48, 900), (32, 600)),
+            ((48, 301), (40, 257)),
+        ] {
+            let raw: Vec<u8> = (0..w * h * 3).map(|i| ((i * 7919) % 251) as u8).collect();
+            let got = resize_rgb(&raw, w, h, dst.0, dst.1);
+            let want = reference(&raw, (w, h), dst);
+            assert_eq!(got.len(), want.len());
+            for (i, (a, b)) in got.iter().zip(&want).enumerate() {
+                assert_eq!(a.to_bits(), b.to_bits(), "{dst:?}: value {i}: {a} vs {b}");
+            }
+        }
     }
 
     #[test]

@@ -37,7 +37,7 @@ from tqdm import tqdm
 from conesight_train.detector.augment import to_input
 from conesight_train.detector.config import open_source
 from conesight_train.detector.data import IMAGE_SUFFIXES, FrameSource, LabelledFrame, read_rgb
-from conesight_train.detector.frame_input import FILL, FrameInputParams
+from conesight_train.detector.frame_input import FILL, FrameInputParams, input_size_arg
 from conesight_train.detector.metrics import (
     WORKING_RANGE_M,
     ImageResult,
@@ -57,8 +57,11 @@ CLASS_BGR = ((255, 90, 0), (0, 220, 255), (0, 120, 255), (0, 60, 200))
 Runner = Callable[[np.ndarray], np.ndarray]
 
 
-def torch_runner(checkpoint: Path) -> tuple[Runner, FrameInputParams, Thresholds]:
-    """A checkpoint's model as input [1, 3, H, W] -> output [4 + C, N]."""
+def torch_runner(
+    checkpoint: Path, input_params: FrameInputParams | None = None
+) -> tuple[Runner, FrameInputParams, Thresholds]:
+    """A checkpoint's model as input [1, 3, H, W] -> output [4 + C, N], at its training input
+    size or at `input_params` (the network is fully convolutional)."""
     from conesight_train.detector.train import model_from_checkpoint
 
     model, config, _ = model_from_checkpoint(checkpoint)
@@ -68,7 +71,7 @@ def torch_runner(checkpoint: Path) -> tuple[Runner, FrameInputParams, Thresholds
         with torch.no_grad():
             return head(torch.from_numpy(x)).numpy()[0]
 
-    return run, config.input, config.thresholds
+    return run, input_params or config.input, config.thresholds
 
 
 def onnx_runner(path: Path, threads: int) -> tuple[Runner, FrameInputParams, Thresholds]:
@@ -208,6 +211,11 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--png-count", type=int, default=1000)
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument(
+        "--input-size",
+        type=input_size_arg,
+        help="WIDTHxHEIGHT: run a checkpoint at this input size instead of its training one",
+    )
+    parser.add_argument(
         "--count-far-detections",
         action="store_true",
         help="count unmatched detections standing beyond the working range as false positives "
@@ -225,7 +233,9 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_args(argv)
     torch.set_num_threads(args.threads)
     if args.checkpoint:
-        runner, input_params, thresholds = torch_runner(args.checkpoint)
+        runner, input_params, thresholds = torch_runner(args.checkpoint, args.input_size)
+    elif args.input_size:
+        raise SystemExit("--input-size works with --checkpoint; an ONNX file has a fixed input")
     else:
         runner, input_params, thresholds = onnx_runner(args.onnx, args.threads)
     if args.data:

@@ -18,6 +18,7 @@ x [0, H]): input = frame * (sx, sy), with sx = resized_width / frame_width and l
 
 from __future__ import annotations
 
+import argparse
 from dataclasses import asdict, dataclass
 
 import cv2
@@ -63,6 +64,22 @@ class FrameInputParams:
     def to_dict(self) -> dict[str, int]:
         """The fields for checkpoints and cards."""
         return asdict(self)
+
+    @classmethod
+    def parse(cls, text: str) -> FrameInputParams:
+        """`WIDTHxHEIGHT` (e.g. `1280x800`, CLI flags); ValueError naming the text otherwise."""
+        parts = text.lower().split("x")
+        if len(parts) != 2 or not all(p.strip().isdigit() for p in parts):
+            raise ValueError(f"input size {text!r}: expected WIDTHxHEIGHT, e.g. 1280x800")
+        return cls(int(parts[0]), int(parts[1]))
+
+
+def input_size_arg(text: str) -> FrameInputParams:
+    """argparse type for `--input-size WIDTHxHEIGHT` (the error names the flag's rule)."""
+    try:
+        return FrameInputParams.parse(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
 
 
 def resize_area(image: np.ndarray, size_wh: tuple[int, int]) -> np.ndarray:

@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -21,7 +21,7 @@ import onnx
 import onnxruntime as ort
 import torch
 
-from conesight_train.detector.frame_input import FrameInputParams
+from conesight_train.detector.frame_input import FrameInputParams, input_size_arg
 from conesight_train.detector.metrics import finite_json
 from conesight_train.detector.model import CLASS_NAMES, ConeDetector, ExportHead
 from conesight_train.detector.postprocess import Thresholds
@@ -157,10 +157,17 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument(
         "--score-threshold", type=float, help="operating score threshold for the card"
     )
+    parser.add_argument(
+        "--input-size",
+        type=input_size_arg,
+        help="WIDTHxHEIGHT: export at this input size instead of the training one",
+    )
     args = parser.parse_args(argv)
     from conesight_train.detector.train import model_from_checkpoint
 
     model, config, _ = model_from_checkpoint(args.checkpoint)
+    if args.input_size is not None:
+        config = replace(config, input=args.input_size)
     config_dict = config.to_dict()
     if args.score_threshold is not None:
         if not 0.0 < args.score_threshold < 1.0:
