@@ -4,8 +4,9 @@ trained by `bench/yolo_peer_train.py` on the same frames with the same CPU budge
 real test frames, in one run.
 
 Both models run as ONNX in ONNX Runtime, each with its own preprocessing (ours: the whole frame
-area-resized into 960x608, `conesight_train.detector.frame_input`; Ultralytics: letterbox to
-its `imgsz`, read from the model's metadata), and their detections go through the same
+area-resized into its card's input, 1152x736 for the shipped model,
+`conesight_train.detector.frame_input`; Ultralytics: letterbox to its `imgsz`, read from the
+model's metadata), and their detections go through the same
 decoding rule (score threshold, class-aware NMS at IoU 0.5, at most 300) and the same metrics
 (`conesight_train.detector.metrics`): AP@0.5 per class and their mean over blue, yellow, orange
 and large orange (`unknown_cone` is an ignore region for both), precision and recall at each
