@@ -42,7 +42,7 @@ pub fn run(args: &KeypointsArgs) -> anyhow::Result<()> {
     let onnx = ModelOptions {
         library: args.onnxruntime.clone(),
         intra_threads: None,
-        allow_spinning: None,
+        allow_spinning: false,
         execution_provider: args.execution_provider,
     };
     let mut stage = KeypointStage::load(&path, &onnx)?;

@@ -97,7 +97,7 @@ pub fn run(args: &PredictArgs) -> anyhow::Result<()> {
         onnx: ModelOptions {
             library: args.onnxruntime.clone(),
             intra_threads: args.onnx_threads,
-            allow_spinning: None,
+            allow_spinning: false,
             execution_provider: args.execution_provider,
         },
         on_ground_plane: args.ground_plane,

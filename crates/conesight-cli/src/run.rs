@@ -124,8 +124,8 @@ pub struct RunArgs {
     )]
     execution_provider: conesight_onnx::ExecutionProvider,
     /// Whether ONNX Runtime's idle threads busy-wait between calls (default: ONNX Runtime's).
-    #[arg(long = "onnx-spinning")]
-    onnx_spinning: Option<bool>,
+    #[arg(long = "onnx-spinning", default_value_t = false, action = clap::ArgAction::Set)]
+    onnx_spinning: bool,
     /// Constrain cone bases to the road plane.
     #[arg(long = "ground-plane")]
     ground_plane: bool,

@@ -3,11 +3,11 @@
 //!
 //! ```text
 //! cargo run --release -p conesight-detect --example detect_speed -- MODEL.onnx [FRAME.png] \
-//!     [--threads N] [--frames N] [--list] [--no-spin]
+//!     [--threads N] [--frames N] [--list] [--spin]
 //! ```
-//! `--list` prints the detections (class, score, box in frame pixels). `--no-spin` turns off
-//! ONNX Runtime's busy-waiting idle threads (as the services on a shared machine run it), so
-//! the two-thread preprocessing gets the second core.
+//! `--list` prints the detections (class, score, box in frame pixels). Idle ONNX Runtime
+//! threads sleep between calls, as everywhere in conesight; `--spin` makes them busy-wait
+//! (ONNX Runtime's own default) to compare. `--no-spin` is accepted and is the default.
 //! Without a frame it uses a 1920x1200 noise frame. A random-init model of the shipped size
 //! comes from `python -m conesight_train.detector.speed --save build/detector-random.onnx`.
 
@@ -25,14 +25,15 @@ fn main() -> anyhow::Result<()> {
     let mut threads = 1usize;
     let mut frames = 30usize;
     let mut list = false;
-    let mut spinning = None;
+    let mut spinning = false;
     let mut args = std::env::args().skip(1);
     while let Some(arg) = args.next() {
         match arg.as_str() {
             "--threads" => threads = args.next().context("--threads N")?.parse()?,
             "--frames" => frames = args.next().context("--frames N")?.parse()?,
             "--list" => list = true,
-            "--no-spin" => spinning = Some(false),
+            "--spin" => spinning = true,
+            "--no-spin" => spinning = false,
             _ if model.is_none() => model = Some(PathBuf::from(arg)),
             _ if frame_path.is_none() => frame_path = Some(PathBuf::from(arg)),
             _ => bail!("unexpected argument {arg}"),

@@ -166,7 +166,7 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Meta> {
     let onnx = ModelOptions {
         library: None,
         intra_threads: config.threads,
-        allow_spinning: None,
+        allow_spinning: false,
         execution_provider: Default::default(),
     };
     let params = FrameParams::default();

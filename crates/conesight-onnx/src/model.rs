@@ -17,10 +17,11 @@ pub struct ModelOptions {
     pub library: Option<PathBuf>,
     /// Intra-op threads; `None` lets ONNX Runtime decide (all cores).
     pub intra_threads: Option<usize>,
-    /// Whether idle intra-op threads spin (busy-wait) for the next call; `None` keeps ONNX
-    /// Runtime's default (spinning). Services sharing two cores turn it off, so one model's
-    /// idle threads do not steal the core another process is computing on.
-    pub allow_spinning: Option<bool>,
+    /// Whether idle intra-op threads spin (busy-wait) for the next call. Off by default (ONNX
+    /// Runtime's own default is on): on a 2-core host one model's spinning threads take the
+    /// core another model or service is computing on, and even a lone back-to-back loop was no
+    /// faster with them (models/detector.md, Speed).
+    pub allow_spinning: bool,
     /// Where the models run (`--execution-provider`); CPU by default.
     pub execution_provider: ExecutionProvider,
 }
@@ -72,13 +73,11 @@ impl OnnxModel {
                 .with_intra_threads(threads)
                 .map_err(|e| load_error(e.into()))?;
         }
-        if let Some(spinning) = options.allow_spinning {
-            builder = builder
-                .with_intra_op_spinning(spinning)
-                .map_err(|e| load_error(e.into()))?
-                .with_inter_op_spinning(spinning)
-                .map_err(|e| load_error(e.into()))?;
-        }
+        builder = builder
+            .with_intra_op_spinning(options.allow_spinning)
+            .map_err(|e| load_error(e.into()))?
+            .with_inter_op_spinning(options.allow_spinning)
+            .map_err(|e| load_error(e.into()))?;
         if options.execution_provider != ExecutionProvider::Cpu {
             options.execution_provider.check_available()?;
             builder = builder

@@ -39,8 +39,13 @@ pub struct DetectorArgs {
     pub onnx_threads: Option<usize>,
     /// Whether ONNX Runtime's idle threads busy-wait for the next call (`true`: ONNX Runtime's
     /// default; `false` frees the cores for the other services between frames).
-    #[arg(long = "onnx-spinning", env = "CONESIGHT_ONNX_SPINNING")]
-    pub onnx_spinning: Option<bool>,
+    #[arg(
+        long = "onnx-spinning",
+        env = "CONESIGHT_ONNX_SPINNING",
+        default_value_t = false,
+        action = clap::ArgAction::Set
+    )]
+    pub onnx_spinning: bool,
     /// Where the car itself shows, in frame pixels: detections standing there are dropped.
     /// Points `"x,y x,y x,y"` (polygons separated by `;`), or a YAML/JSON file with
     /// `ego_mask_px: [[x, y], ...]` (e.g. the camera's calibration YAML with that key).
@@ -55,7 +60,7 @@ impl DetectorArgs {
             common,
             model: None,
             onnx_threads: None,
-            onnx_spinning: None,
+            onnx_spinning: false,
             ego_mask: None,
         }
     }
@@ -192,4 +197,25 @@ pub fn main_from(argv: Vec<std::ffi::OsString>) -> std::process::ExitCode {
         Some(MAX_INPUT_AGE),
         |node, shutdown| async move { run(&args, node, shutdown).await },
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser;
+
+    use super::Cli;
+
+    fn spinning(argv: &[&str]) -> Result<bool, clap::Error> {
+        Cli::try_parse_from(std::iter::once("detector").chain(argv.iter().copied()))
+            .map(|cli| cli.args.onnx_spinning)
+    }
+
+    #[test]
+    fn onnx_threads_sleep_unless_spinning_is_asked_for() {
+        assert!(!spinning(&[]).unwrap());
+        assert!(spinning(&["--onnx-spinning", "true"]).unwrap());
+        assert!(!spinning(&["--onnx-spinning", "false"]).unwrap());
+        let error = spinning(&["--onnx-spinning", "maybe"]).unwrap_err().to_string();
+        assert!(error.contains("--onnx-spinning"), "{error}");
+    }
 }

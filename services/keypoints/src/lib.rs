@@ -55,8 +55,13 @@ pub struct KeypointsArgs {
     pub onnx_threads: Option<usize>,
     /// Whether ONNX Runtime's idle threads busy-wait for the next call (`true`: ONNX Runtime's
     /// default; `false` frees the cores for the other services between frames).
-    #[arg(long = "onnx-spinning", env = "CONESIGHT_ONNX_SPINNING")]
-    pub onnx_spinning: Option<bool>,
+    #[arg(
+        long = "onnx-spinning",
+        env = "CONESIGHT_ONNX_SPINNING",
+        default_value_t = false,
+        action = clap::ArgAction::Set
+    )]
+    pub onnx_spinning: bool,
     /// Most cones per frame sent through the network (highest scores kept).
     #[arg(long = "max-cones", default_value_t = DEFAULT_MAX_CONES_PER_FRAME)]
     pub max_cones: usize,
@@ -74,7 +79,7 @@ impl KeypointsArgs {
             common,
             model: None,
             onnx_threads: None,
-            onnx_spinning: None,
+            onnx_spinning: false,
             max_cones: DEFAULT_MAX_CONES_PER_FRAME,
             pair_cache: DEFAULT_PAIR_CACHE,
         }

@@ -145,14 +145,14 @@ fn detector_model() -> anyhow::Result<(PathBuf, &'static str)> {
 async fn main() -> anyhow::Result<()> {
     let mut seconds = 8.0_f64;
     let mut threads: Option<usize> = None;
-    let mut spinning: Option<bool> = None;
+    let mut spinning = false;
     let mut args = std::env::args().skip(1);
     while let Some(arg) = args.next() {
         match arg.as_str() {
             "--seconds" => seconds = args.next().context("--seconds S")?.parse()?,
             "--onnx-threads" => threads = Some(args.next().context("--onnx-threads N")?.parse()?),
             "--onnx-spinning" => {
-                spinning = Some(args.next().context("--onnx-spinning true|false")?.parse()?);
+                spinning = args.next().context("--onnx-spinning true|false")?.parse()?;
             }
             other => anyhow::bail!(
                 "unknown argument {other}; usage: pipeline-bench [--seconds S] [--onnx-threads N] [--onnx-spinning true|false]"
@@ -164,9 +164,7 @@ async fn main() -> anyhow::Result<()> {
     if let Some(n) = threads {
         onnx_args.extend(["--onnx-threads".to_owned(), n.to_string()]);
     }
-    if let Some(spin) = spinning {
-        onnx_args.extend(["--onnx-spinning".to_owned(), spin.to_string()]);
-    }
+    onnx_args.extend(["--onnx-spinning".to_owned(), spinning.to_string()]);
     let exe = std::env::current_exe()?
         .parent()
         .context("no folder of the benchmark binary")?
@@ -181,7 +179,7 @@ async fn main() -> anyhow::Result<()> {
     println!(
         "pipeline benchmark: 1920x1200 frames, {detector_note}; ONNX Runtime threads {}, spinning {}; load average {}",
         threads.map_or_else(|| "default".to_owned(), |n| n.to_string()),
-        spinning.map_or_else(|| "default".to_owned(), |s| s.to_string()),
+        spinning,
         load.split_whitespace()
             .take(3)
             .collect::<Vec<_>>()
