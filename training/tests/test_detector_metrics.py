@@ -3,7 +3,12 @@
 import numpy as np
 import pytest
 
-from conesight_train.detector.metrics import ImageResult, average_precision, evaluate
+from conesight_train.detector.metrics import (
+    ImageResult,
+    average_precision,
+    box_residuals,
+    evaluate,
+)
 from conesight_train.detector.postprocess import Thresholds, decode
 
 NAMES = ("blue", "yellow", "orange", "large_orange")
@@ -141,3 +146,26 @@ def test_unmatched_detections_standing_beyond_the_working_range_count_nowhere():
     assert evaluate([matched], NAMES, 0.5)["precision"] == 1.0
     # With no working range nothing is left out.
     assert evaluate([ranged], NAMES, 0.5, max_range_m=None)["precision"] == pytest.approx(1 / 3)
+
+
+def test_box_residuals_find_a_lean_by_height_band():
+    # Small cones (10 px detections): truths 1 px lower and 10 % taller than the boxes; large
+    # ones (50 px): exact. A low-score box and a wrong-class box take no part.
+    small = image(
+        [[0, 0, 7, 10, 0.9, 0], [20, 0, 27, 10, 0.8, 1], [40, 0, 47, 10, 0.1, 0]],
+        [[0, 0.5, 7, 11.5], [20, 0.5, 27, 11.5], [40, 5, 47, 15]],
+        [0, 1, 0],
+    )
+    large = image([[0, 0, 35, 50, 0.9, 2]], [[0, 0, 35, 50]], [2])
+    wrong = image([[0, 0, 7, 10, 0.9, 1]], [[0, 0, 7, 10]], [0])
+    rows = box_residuals([small, large, wrong], score_threshold=0.4)
+    low = rows["0-20 px"]
+    assert low["pairs"] == 2
+    assert low["centre_y_over_h_mean"] == pytest.approx(0.1)
+    assert low["centre_x_over_h_mean"] == pytest.approx(0.0)
+    assert low["log_h_mean"] == pytest.approx(np.log(1.1))
+    assert low["log_w_mean"] == pytest.approx(0.0) and low["log_h_sd"] == pytest.approx(0.0)
+    assert low["share_under_iou_0.5"] == 0.0
+    high = rows[">= 40 px"]
+    assert high["pairs"] == 1 and high["log_h_mean"] == pytest.approx(0.0)
+    assert rows["20-40 px"]["pairs"] == 0 and np.isnan(rows["20-40 px"]["log_h_mean"])

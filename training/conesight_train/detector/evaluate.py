@@ -16,6 +16,7 @@ see `metrics.py`), recall by box height (< 20, 20-40, >= 40 px); then the same o
 Real frames have no ranges: every labelled cone counts (`unknown_cone` is an ignore region).
 Drawn PNGs show each detection (class colour, score) and, when labelled, missed truths (white).
 `--iou-sweep 0.3,0.5` repeats mAP and recall at other IoU thresholds (JSON `iou_sweep`).
+`--residuals` says whether matched boxes lean (a bias one could correct) or scatter.
 `--shift F` moves every frame down by F of its height (up when negative; the uncovered rows
 grey), as a camera pitched up (down) would see it, with no calibration given.
 """
@@ -41,6 +42,7 @@ from conesight_train.detector.frame_input import FILL, FrameInputParams, input_s
 from conesight_train.detector.metrics import (
     WORKING_RANGE_M,
     ImageResult,
+    box_residuals,
     evaluate,
     finite_json,
     match,
@@ -230,6 +232,12 @@ def main(argv: list[str] | None = None) -> None:
         help="comma-separated IoU thresholds: mAP and recall at each (working range), to tell "
         "boxes placed a little off from cones not found",
     )
+    parser.add_argument(
+        "--residuals",
+        action="store_true",
+        help="how matched boxes (IoU >= 0.3, score >= the threshold) sit against their truths, "
+        "by height band: mean and spread of centre offset and log size ratio (JSON `residuals`)",
+    )
     args = parser.parse_args(argv)
     torch.set_num_threads(args.threads)
     if args.checkpoint:
@@ -271,6 +279,17 @@ def main(argv: list[str] | None = None) -> None:
                 by_iou[f"{t:g}"] = {"map": m["map50"], "recall": m["recall"]}
                 print(f"  IoU >= {t:g}: mAP {m['map50']:.3f}  recall {m['recall']:.3f}")
             report["iou_sweep"] = by_iou
+        if args.residuals:
+            residuals = box_residuals(results, score_threshold=thresholds.score_threshold)
+            for band, row in residuals.items():
+                print(
+                    f"  {band:<9} {int(row['pairs'])} pairs at IoU >= 0.3: centre offset / h "
+                    f"x {row['centre_x_over_h_mean']:+.3f} y {row['centre_y_over_h_mean']:+.3f}, "
+                    f"log size ratio w {row['log_w_mean']:+.3f} (sd {row['log_w_sd']:.3f}) "
+                    f"h {row['log_h_mean']:+.3f} (sd {row['log_h_sd']:.3f}), "
+                    f"under IoU 0.5 {row['share_under_iou_0.5']:.3f}"
+                )
+            report["residuals"] = residuals
     else:
         frames = unlabelled_frames(args.images)[: args.limit]
         results = run_frames(frames, runner, input_params, thresholds, args.png, args.png_count)
