@@ -215,7 +215,9 @@ mod tests {
         assert!(!spinning(&[]).unwrap());
         assert!(spinning(&["--onnx-spinning", "true"]).unwrap());
         assert!(!spinning(&["--onnx-spinning", "false"]).unwrap());
-        let error = spinning(&["--onnx-spinning", "maybe"]).unwrap_err().to_string();
+        let error = spinning(&["--onnx-spinning", "maybe"])
+            .unwrap_err()
+            .to_string();
         assert!(error.contains("--onnx-spinning"), "{error}");
     }
 }
