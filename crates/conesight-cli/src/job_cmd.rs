@@ -281,7 +281,7 @@ async fn process(
     readiness.push(detector.readiness.clone());
     let mut detector_args = DetectorArgs::new(common.clone());
     detector_args.model = models.get("detector").map(|m| PathBuf::from(&m.path));
-    detector_args.onnx_threads = args.onnx_threads;
+    detector_args.onnx.threads = args.onnx_threads;
     let stop = shutdown.clone();
     tasks.push(tokio::spawn(async move {
         conesight_detector_service::run(&detector_args, detector, stop).await
@@ -290,7 +290,7 @@ async fn process(
     readiness.push(keypoints.readiness.clone());
     let mut keypoints_args = KeypointsArgs::new(common.clone());
     keypoints_args.model = models.get("keypoints").map(|m| PathBuf::from(&m.path));
-    keypoints_args.onnx_threads = args.onnx_threads;
+    keypoints_args.onnx.threads = args.onnx_threads;
     let stop = shutdown.clone();
     tasks.push(tokio::spawn(async move {
         conesight_keypoints_service::run(&keypoints_args, keypoints, stop).await

@@ -18,7 +18,7 @@ use conesight_camera_service::{CameraArgs, CameraFrame, load_source};
 use conesight_detector_service::DetectorArgs;
 use conesight_keypoints_service::KeypointsArgs;
 use conesight_localiser_service::LocaliserArgs;
-use conesight_pipeline::node::{CommonArgs, MAX_INPUT_AGE};
+use conesight_pipeline::node::{CommonArgs, MAX_INPUT_AGE, OnnxArgs};
 use conesight_pipeline::stats::{fmt_opt, median, percentile};
 use conesight_pipeline::{Node, Shutdown, locate_detector, match_cones};
 use conesight_proto::{ConeKeypoints, LocatedCone, now_ns, pb};
@@ -278,6 +278,10 @@ async fn run_async(args: RunArgs) -> anyhow::Result<()> {
             nodes.push(start_node(name, label, Some(MAX_INPUT_AGE)));
         }
     }
+    let onnx = OnnxArgs {
+        threads: args.onnx_threads,
+        spinning: args.onnx_spinning,
+    };
     let mut readiness = Vec::new();
     // Liveliness tokens and health/manifest/schema queryables, withdrawn when the run ends.
     let mut presences = Vec::new();
@@ -293,8 +297,7 @@ async fn run_async(args: RunArgs) -> anyhow::Result<()> {
             ServiceName::Detector => {
                 let mut service = DetectorArgs::new(common(name));
                 service.model = Some(detector_path.clone());
-                service.onnx_threads = args.onnx_threads;
-                service.onnx_spinning = args.onnx_spinning;
+                service.onnx = onnx.clone();
                 service.ego_mask = args.ego_mask.clone();
                 tokio::spawn(async move {
                     conesight_detector_service::run(&service, node, shutdown).await
@@ -303,8 +306,7 @@ async fn run_async(args: RunArgs) -> anyhow::Result<()> {
             ServiceName::Keypoints => {
                 let mut service = KeypointsArgs::new(common(name));
                 service.model = args.keypoint_model.clone();
-                service.onnx_threads = args.onnx_threads;
-                service.onnx_spinning = args.onnx_spinning;
+                service.onnx = onnx.clone();
                 tokio::spawn(async move {
                     conesight_keypoints_service::run(&service, node, shutdown).await
                 })

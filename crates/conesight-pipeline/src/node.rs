@@ -61,6 +61,38 @@ pub struct CommonArgs {
     pub execution_provider: conesight_onnx::ExecutionProvider,
 }
 
+/// ONNX Runtime settings of a model service (detector, keypoints).
+#[derive(Debug, Clone, Default, PartialEq, Eq, clap::Args)]
+pub struct OnnxArgs {
+    /// ONNX Runtime intra-op threads (default: ONNX Runtime's choice, every core).
+    #[arg(long = "onnx-threads", env = "CONESIGHT_ONNX_THREADS")]
+    pub threads: Option<usize>,
+    /// Whether ONNX Runtime's idle threads busy-wait for the next call (default `false`: they
+    /// sleep, leaving the cores to the other services; `true` is ONNX Runtime's own default).
+    #[arg(
+        long = "onnx-spinning",
+        env = "CONESIGHT_ONNX_SPINNING",
+        default_value_t = false,
+        action = clap::ArgAction::Set
+    )]
+    pub spinning: bool,
+}
+
+impl OnnxArgs {
+    /// The model options these flags give, running on `provider`.
+    pub fn model_options(
+        &self,
+        provider: conesight_onnx::ExecutionProvider,
+    ) -> conesight_onnx::ModelOptions {
+        conesight_onnx::ModelOptions {
+            intra_threads: self.threads,
+            allow_spinning: self.spinning,
+            execution_provider: provider,
+            ..conesight_onnx::ModelOptions::default()
+        }
+    }
+}
+
 /// How far over `--max-message-mb` Zenoh still delivers a message: room for Zenoh's own framing
 /// of a message of exactly the limit (its key, encoding and fragment headers).
 pub const ZENOH_RX_HEADROOM_BYTES: usize = 64 << 10;

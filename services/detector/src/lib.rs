@@ -18,8 +18,7 @@ use std::time::Instant;
 use conesight_bus::zenoh::sample::Sample;
 use conesight_bus::{Stream, encode};
 use conesight_detect::EgoMask;
-use conesight_onnx::ModelOptions;
-use conesight_pipeline::node::CommonArgs;
+use conesight_pipeline::node::{CommonArgs, OnnxArgs};
 use conesight_pipeline::{DetectorStage, Node, Shutdown, locate_detector};
 use conesight_proto::{pb, require_header};
 use conesight_service::Worker;
@@ -34,18 +33,9 @@ pub struct DetectorArgs {
     /// `models/detector.onnx`.
     #[arg(long = "model", env = "CONESIGHT_DETECTOR_MODEL")]
     pub model: Option<PathBuf>,
-    /// ONNX Runtime intra-op threads (default: ONNX Runtime's choice, every core).
-    #[arg(long = "onnx-threads", env = "CONESIGHT_ONNX_THREADS")]
-    pub onnx_threads: Option<usize>,
-    /// Whether ONNX Runtime's idle threads busy-wait for the next call (`true`: ONNX Runtime's
-    /// default; `false` frees the cores for the other services between frames).
-    #[arg(
-        long = "onnx-spinning",
-        env = "CONESIGHT_ONNX_SPINNING",
-        default_value_t = false,
-        action = clap::ArgAction::Set
-    )]
-    pub onnx_spinning: bool,
+    /// ONNX Runtime threads and spinning.
+    #[command(flatten)]
+    pub onnx: OnnxArgs,
     /// Where the car itself shows, in frame pixels: detections standing there are dropped.
     /// Points `"x,y x,y x,y"` (polygons separated by `;`), or a YAML/JSON file with
     /// `ego_mask_px: [[x, y], ...]` (e.g. the camera's calibration YAML with that key).
@@ -59,8 +49,7 @@ impl DetectorArgs {
         Self {
             common,
             model: None,
-            onnx_threads: None,
-            onnx_spinning: false,
+            onnx: OnnxArgs::default(),
             ego_mask: None,
         }
     }
@@ -70,12 +59,7 @@ impl DetectorArgs {
 pub async fn run(args: &DetectorArgs, node: Node, shutdown: Shutdown) -> anyhow::Result<()> {
     let camera = args.common.camera.as_str();
     let path = locate_detector(args.model.as_deref());
-    let onnx = ModelOptions {
-        intra_threads: args.onnx_threads,
-        allow_spinning: args.onnx_spinning,
-        execution_provider: args.common.execution_provider,
-        ..ModelOptions::default()
-    };
+    let onnx = args.onnx.model_options(args.common.execution_provider);
     let ego_mask = args.ego_mask.as_deref().map(EgoMask::parse).transpose()?;
     let model_path = path.clone();
     let mut stage =
@@ -207,7 +191,7 @@ mod tests {
 
     fn spinning(argv: &[&str]) -> Result<bool, clap::Error> {
         Cli::try_parse_from(std::iter::once("detector").chain(argv.iter().copied()))
-            .map(|cli| cli.args.onnx_spinning)
+            .map(|cli| cli.args.onnx.spinning)
     }
 
     #[test]

@@ -26,10 +26,9 @@ use std::time::Instant;
 
 use conesight_bus::zenoh::sample::Sample;
 use conesight_bus::{Stream, declare_callback_subscriber, encode};
-use conesight_onnx::ModelOptions;
 use conesight_pipeline::gate::InputGate;
 use conesight_pipeline::keypoint_stage::DEFAULT_MAX_CONES_PER_FRAME;
-use conesight_pipeline::node::CommonArgs;
+use conesight_pipeline::node::{CommonArgs, OnnxArgs};
 use conesight_pipeline::{KeypointStage, Node, Shutdown};
 use conesight_proto::{pb, peek_header, require_header};
 use conesight_service::{Submitter, Worker};
@@ -50,18 +49,9 @@ pub struct KeypointsArgs {
     /// Keypoint model; default: the checkout's `models/keypoints.onnx`.
     #[arg(long = "model", env = "CONESIGHT_KEYPOINT_MODEL")]
     pub model: Option<PathBuf>,
-    /// ONNX Runtime intra-op threads (default: ONNX Runtime's choice, every core).
-    #[arg(long = "onnx-threads", env = "CONESIGHT_ONNX_THREADS")]
-    pub onnx_threads: Option<usize>,
-    /// Whether ONNX Runtime's idle threads busy-wait for the next call (`true`: ONNX Runtime's
-    /// default; `false` frees the cores for the other services between frames).
-    #[arg(
-        long = "onnx-spinning",
-        env = "CONESIGHT_ONNX_SPINNING",
-        default_value_t = false,
-        action = clap::ArgAction::Set
-    )]
-    pub onnx_spinning: bool,
+    /// ONNX Runtime threads and spinning.
+    #[command(flatten)]
+    pub onnx: OnnxArgs,
     /// Most cones per frame sent through the network (highest scores kept).
     #[arg(long = "max-cones", default_value_t = DEFAULT_MAX_CONES_PER_FRAME)]
     pub max_cones: usize,
@@ -78,8 +68,7 @@ impl KeypointsArgs {
         Self {
             common,
             model: None,
-            onnx_threads: None,
-            onnx_spinning: false,
+            onnx: OnnxArgs::default(),
             max_cones: DEFAULT_MAX_CONES_PER_FRAME,
             pair_cache: DEFAULT_PAIR_CACHE,
         }
@@ -90,12 +79,7 @@ impl KeypointsArgs {
 pub async fn run(args: &KeypointsArgs, node: Node, shutdown: Shutdown) -> anyhow::Result<()> {
     let camera = args.common.camera.as_str();
     let path = conesight_pipeline::models::locate_keypoint_model(args.model.as_deref());
-    let onnx = ModelOptions {
-        intra_threads: args.onnx_threads,
-        allow_spinning: args.onnx_spinning,
-        execution_provider: args.common.execution_provider,
-        ..ModelOptions::default()
-    };
+    let onnx = args.onnx.model_options(args.common.execution_provider);
     let max_cones = args.max_cones;
     let model_path = path.clone();
     let mut stage = tokio::task::spawn_blocking(move || {
