@@ -113,9 +113,9 @@ pub struct RunArgs {
     /// Keypoint model (default: the checkout's models/keypoints.onnx).
     #[arg(long = "keypoint-model")]
     keypoint_model: Option<PathBuf>,
-    /// ONNX Runtime threads per model.
-    #[arg(long = "onnx-threads")]
-    onnx_threads: Option<usize>,
+    /// ONNX Runtime threads per model and spinning.
+    #[command(flatten)]
+    onnx: OnnxArgs,
     /// Where the detector and keypoint models run: cpu, cuda or tensorrt.
     #[arg(
         long = "execution-provider",
@@ -123,9 +123,6 @@ pub struct RunArgs {
         default_value_t
     )]
     execution_provider: conesight_onnx::ExecutionProvider,
-    /// Whether ONNX Runtime's idle threads busy-wait between calls (default: ONNX Runtime's).
-    #[arg(long = "onnx-spinning", default_value_t = false, action = clap::ArgAction::Set)]
-    onnx_spinning: bool,
     /// Constrain cone bases to the road plane.
     #[arg(long = "ground-plane")]
     ground_plane: bool,
@@ -278,10 +275,6 @@ async fn run_async(args: RunArgs) -> anyhow::Result<()> {
             nodes.push(start_node(name, label, Some(MAX_INPUT_AGE)));
         }
     }
-    let onnx = OnnxArgs {
-        threads: args.onnx_threads,
-        spinning: args.onnx_spinning,
-    };
     let mut readiness = Vec::new();
     // Liveliness tokens and health/manifest/schema queryables, withdrawn when the run ends.
     let mut presences = Vec::new();
@@ -297,7 +290,7 @@ async fn run_async(args: RunArgs) -> anyhow::Result<()> {
             ServiceName::Detector => {
                 let mut service = DetectorArgs::new(common(name));
                 service.model = Some(detector_path.clone());
-                service.onnx = onnx.clone();
+                service.onnx = args.onnx.clone();
                 service.ego_mask = args.ego_mask.clone();
                 tokio::spawn(async move {
                     conesight_detector_service::run(&service, node, shutdown).await
@@ -306,7 +299,7 @@ async fn run_async(args: RunArgs) -> anyhow::Result<()> {
             ServiceName::Keypoints => {
                 let mut service = KeypointsArgs::new(common(name));
                 service.model = args.keypoint_model.clone();
-                service.onnx = onnx.clone();
+                service.onnx = args.onnx.clone();
                 tokio::spawn(async move {
                     conesight_keypoints_service::run(&service, node, shutdown).await
                 })

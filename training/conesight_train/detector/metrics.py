@@ -43,6 +43,11 @@ NEAR_RANGE_M = 20.0
 WORKING_RANGE_M = 30.0
 
 
+def height_band_name(lo: float, hi: float) -> str:
+    """A height band's key in the reports: "0-20 px", ">= 40 px"."""
+    return f"{lo:g}-{hi:g} px" if np.isfinite(hi) else f">= {lo:g} px"
+
+
 # Share of an unmatched detection's area on an ignored truth that makes it ignored too.
 IGNORE_COVER = 0.5
 
@@ -191,7 +196,7 @@ def evaluate(
         for b, (lo, hi) in enumerate(DISTANCE_BANDS_M)
     }
     heights = {
-        (f"{lo:g}-{hi:g} px" if np.isfinite(hi) else f">= {lo:g} px"): {
+        height_band_name(lo, hi): {
             "truths": int(height_total[b]),
             "recall": float(height_found[b] / height_total[b]) if height_total[b] else float("nan"),
         }
@@ -265,7 +270,7 @@ def box_residuals(
     out: dict[str, dict[str, float]] = {}
     for lo, hi in bands_px:
         band = table[(table[:, 0] >= lo) & (table[:, 0] < hi)]
-        name = f"{lo:g}-{hi:g} px" if np.isfinite(hi) else f">= {lo:g} px"
+        name = height_band_name(lo, hi)
         row: dict[str, float] = {"pairs": float(len(band))}
         for i, key in enumerate(("centre_x_over_h", "centre_y_over_h", "log_w", "log_h"), 1):
             row[f"{key}_mean"] = float(band[:, i].mean()) if len(band) else float("nan")
