@@ -22,7 +22,8 @@ pub mod pnp;
 
 pub use camera::{Camera, Distortion, DistortionModel, Extrinsics};
 pub use cone::{
-    CR3D, ConeClass, ConeModel, KEYPOINT_COUNT, Keypoint, cross_ratio, silhouette_keypoints,
+    CR3D, ConeClass, ConeGeometry, ConeModel, KEYPOINT_COUNT, Keypoint, cross_ratio,
+    silhouette_keypoints,
 };
 pub use error::{ConfigError, GeometryError};
 pub use pnp::{ConeEstimate, ConeObservation, ConePnpParams, ConeSolver, solve_cone};

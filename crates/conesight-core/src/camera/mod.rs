@@ -20,6 +20,8 @@ mod yaml;
 
 pub use extrinsics::Extrinsics;
 pub use formats::CalibrationFormat;
+pub(crate) use ros::read_text;
+pub(crate) use yaml::from_str as yaml_from_str;
 
 use nalgebra::{Matrix2, Matrix2x3, Point2, Point3, Vector2, Vector3};
 use serde::{Deserialize, Serialize};

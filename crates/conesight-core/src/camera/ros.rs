@@ -52,7 +52,7 @@ pub(super) fn field_error(
 }
 
 /// A config file's text; an I/O error names the file.
-pub(super) fn read_text(path: &Path) -> Result<String, ConfigError> {
+pub(crate) fn read_text(path: &Path) -> Result<String, ConfigError> {
     std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
         path: path.to_owned(),
         source,

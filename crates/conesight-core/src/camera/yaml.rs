@@ -12,7 +12,7 @@ use serde::de::DeserializeOwned;
 use crate::error::ConfigError;
 
 /// Deserialises `text` into `T`; `fields` are the field paths errors may name (`a.b`).
-pub(super) fn from_str<T: DeserializeOwned>(
+pub(crate) fn from_str<T: DeserializeOwned>(
     text: &str,
     what: &str,
     hint: &'static str,

@@ -3,7 +3,9 @@
 //!
 //! - [`ConeClass`]: blue, yellow, orange, large orange.
 //! - [`Keypoint`]: the 7 keypoints in the order the network regresses them.
-//! - [`ConeModel`] (in `model.rs`): cone geometry in the cone frame, fitted to real labels.
+//! - [`ConeModel`] (in `model.rs`): cone geometry in the cone frame, fitted to real cones.
+//! - [`ConeGeometry`] (in `geometry.rs`): the model of every class, shipped or from a team's
+//!   `--cone-geometry` YAML.
 //! - [`cross_ratio`] and [`CR3D`] (in `cross_ratio.rs`).
 //! - [`silhouette_keypoints`] and [`silhouette_points_in_cone`] (in `silhouette.rs`): where the
 //!   rays from the camera graze the cone body at the keypoint heights.
@@ -11,10 +13,12 @@
 //! Cone frame: origin at the centre of the cone's base on the ground, z up along the axis.
 
 mod cross_ratio;
+mod geometry;
 mod model;
 mod silhouette;
 
 pub use cross_ratio::{CR3D, cross_ratio, side_cross_ratios};
+pub use geometry::ConeGeometry;
 pub use model::ConeModel;
 pub use silhouette::{silhouette_angles, silhouette_keypoints, silhouette_points_in_cone};
 

@@ -42,7 +42,7 @@ pub fn silhouette_points_in_cone(
         )
     };
     Ok(Keypoint::ALL.map(|keypoint| match keypoint {
-        Keypoint::Apex => Point3::new(0.0, 0.0, model.body_height_m),
+        Keypoint::Apex => Point3::new(0.0, 0.0, model.keypoint_heights_m[3]),
         Keypoint::LeftUpper | Keypoint::LeftLower | Keypoint::LeftBase => {
             on_body(left_angle, keypoint.level())
         }
@@ -159,7 +159,10 @@ mod tests {
                     normal.dot(&ray)
                 );
             }
-            assert_eq!(points[0], Point3::new(0.0, 0.0, model.body_height_m));
+            assert_eq!(
+                points[0],
+                Point3::new(0.0, 0.0, model.keypoint_heights_m[3])
+            );
         }
     }
 
@@ -182,7 +185,9 @@ mod tests {
             };
             let mut min_distance = f64::INFINITY;
             for i in 0..=40 {
-                let h = model.body_height_m * f64::from(i) / 40.0;
+                let h = model.plate_height_m
+                    + (model.body_height_m - model.plate_height_m) * f64::from(i) / 40.0;
+                let h = h.min(model.body_height_m);
                 let r = model.radius_at(h).unwrap();
                 for j in 0..3600 {
                     let t = f64::from(j) * std::f64::consts::TAU / 3600.0;

@@ -1,13 +1,25 @@
 //! Box-height ranging, and its fusion with the keypoint PnP estimate.
 //!
-//! A cone of height `H` whose box is `h` pixels tall stands at depth `z = f_y * H / h` (in
-//! undistorted, normalised units: `z = H / (v_bottom - v_top)`). Measured on real frames with
-//! LiDAR truth this "one-line anchor" is almost unbiased with a median error near 5 % of the
-//! range, so it is a measurement of its own, independent of the keypoints: the box comes from
-//! the detector. [`fuse_box_depth`] adds it to a PnP estimate as one more measurement of the
-//! depth (a Kalman update along the camera's z axis), so a cone's range is never worse than the
-//! better of the two by more than their covariances allow, and [`box_estimate`] places a cone
-//! from its box alone, with a covariance to match, when the keypoints give no pose.
+//! A cone's box spans its full height `H`: from the top of the body down to the base plate's
+//! front edge on the road. The one-line formula `z = f_y H / h` takes both at the same depth;
+//! but the plate's front edge is `p` nearer than the base centre (`p` = the plate's half width
+//! times 4/pi, its mean over the cone's yaw), and lower in the image for a camera `c` above the
+//! road, so that formula reads about `c p / H` short (0.45 m for a camera 1 m high: 13 % at
+//! 3.5 m, 2 % at 20 m; real LiDAR-ranged cones showed it 0.35 m short below 5 m). [`box_depth`]
+//! solves the box's true projection instead, in a frame levelled by the cone axis:
+//!
+//! ```text
+//! h = c / (D - p) - (c - H) / (D - r_top)        (normalised, levelled image rows)
+//! ```
+//!
+//! for the horizontal distance `D`. It needs the camera height and the axis (from the
+//! extrinsics; 1 m and level by default), but only through that correction: a pitch error
+//! moves the box's top and bottom rows together. The box is a measurement of its own,
+//! independent of the keypoints: [`fuse_box_depth`] adds it to a PnP estimate as one more
+//! measurement of the depth (a Kalman update along the camera's z axis), so a cone's range is
+//! never worse than the better of the two by more than their covariances allow, and
+//! [`box_estimate`] places a cone from its box alone, with a covariance to match, when the
+//! keypoints give no pose.
 
 use nalgebra::{Matrix3, Point2, Point3, Vector3};
 
@@ -17,11 +29,20 @@ use crate::camera::Camera;
 use crate::cone::{ConeModel, KEYPOINT_COUNT};
 use crate::error::GeometryError;
 
-/// Relative standard deviation of box-height ranging: real labelled boxes gave a median
-/// absolute error of 4.7 % of the range, i.e. a standard deviation near 7 %.
-pub const BOX_RANGE_RELATIVE_SIGMA: f64 = 0.07;
+/// Relative standard deviation of box-height ranging, measured on real frames: on the FSOCO
+/// valid and train splits the detector's boxes range 3.5-4 % apart from the truth they share
+/// with the labelled boxes and the keypoints (three-cornered hat of the three cues, boxes 15-80
+/// px tall; models/keypoints.md). LiDAR-ranged real cones gave a median absolute error of
+/// 4.7 % for the one-line formula.
+pub const BOX_RANGE_RELATIVE_SIGMA: f64 = 0.04;
+/// Standard deviation of the plate's nearest-edge distance over a uniformly random yaw, in half
+/// widths: `sqrt(1 + 2/pi - 16/pi^2)`. The box's range inherits it times `c / H`.
+pub const PLATE_NEAREST_EDGE_SPREAD: f64 = 0.1245;
 /// A box edge within this many pixels of the image's top or bottom edge is taken as cut there.
 pub const EDGE_MARGIN_PX: f64 = 1.0;
+/// Mean distance of a square plate's nearest edge from its centre, in half widths, over a
+/// uniformly random yaw: the mean of `cos a + sin a` over `a` in `[0, pi/4]`, `4 / pi`.
+pub const PLATE_NEAREST_EDGE_FACTOR: f64 = 4.0 / std::f64::consts::PI;
 
 /// How a cone's position was found.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -63,7 +84,7 @@ pub struct ConeBox {
 /// centre (the cone's foot).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct BoxDepth {
-    /// Depth along the camera's z axis, metres.
+    /// Depth of the base centre along the camera's z axis, metres.
     pub depth_m: f64,
     /// Its standard deviation, metres.
     pub sigma_m: f64,
@@ -71,16 +92,21 @@ pub struct BoxDepth {
     pub foot_normalized: nalgebra::Vector2<f64>,
     /// Standard deviation of `foot_normalized` (each axis), normalised units.
     pub foot_sigma: f64,
-    /// Half the width of the cone's base plate, metres (the foot's distance from the axis).
+    /// Distance of the foot (the plate's front edge) from the axis, metres.
     pub base_radius_m: f64,
+    /// The base centre the box places, camera frame, metres.
+    pub base_in_camera: Point3<f64>,
 }
 
-/// The depth the box's height gives (module docs). Errors when the box is not finite, empty,
-/// or cut by the image's top or bottom edge (its height then says nothing about the range).
+/// The depth the box's height gives (module docs), with the cone axis `up_in_camera` and the
+/// camera `camera_height_m` above the road. Errors when the box is not finite, empty, or cut by
+/// the image's top or bottom edge (its height then says nothing about the range).
 pub fn box_depth(
     camera: &Camera,
     model: &ConeModel,
     cone_box: &ConeBox,
+    up_in_camera: &Vector3<f64>,
+    camera_height_m: f64,
 ) -> Result<BoxDepth, GeometryError> {
     let b = cone_box;
     for value in [b.x_min_px, b.y_min_px, b.x_max_px, b.y_max_px] {
@@ -102,29 +128,124 @@ pub fn box_depth(
             expected: "a box not cut by the image's top or bottom edge (its height gives the range)",
         });
     }
+    if !(camera_height_m.is_finite() && camera_height_m > 0.0) {
+        return Err(GeometryError::InvalidParameter {
+            name: "camera_height_m",
+            value: camera_height_m,
+            expected: "a camera above the road (height > 0 m)",
+        });
+    }
     let centre_x = 0.5 * (b.x_min_px + b.x_max_px);
     let top = camera.unproject_normalized(&Point2::new(centre_x, b.y_min_px))?;
     let foot = camera.unproject_normalized(&Point2::new(centre_x, b.y_max_px))?;
-    let height_normalized = foot.y - top.y;
-    if height_normalized <= 0.0 {
+    // The levelled frame: z forward along the road, y down the cone axis.
+    let level_from_camera = level_rotation(up_in_camera);
+    let top_ray = level_from_camera * Vector3::new(top.x, top.y, 1.0);
+    let foot_ray = level_from_camera * Vector3::new(foot.x, foot.y, 1.0);
+    if top_ray.z <= 0.0 || foot_ray.z <= 0.0 {
+        return Err(GeometryError::InvalidParameter {
+            name: "cone box",
+            value: top_ray.z.min(foot_ray.z),
+            expected: "a box in front of the camera's level plane",
+        });
+    }
+    let height_levelled = foot_ray.y / foot_ray.z - top_ray.y / top_ray.z;
+    if height_levelled <= 0.0 {
         return Err(GeometryError::InvalidParameter {
             name: "cone box height",
-            value: height_normalized,
+            value: height_levelled,
             expected: "a box whose bottom lies below its top after undistortion",
         });
     }
-    let depth_m = model.body_height_m / height_normalized;
+    // The plate's front edge and the top's front are nearer along the horizontal direction of
+    // view, which makes `cos_bearing` of that with the levelled z axis.
+    let ahead = Vector3::new(foot_ray.x, 0.0, foot_ray.z).normalize();
+    let cos_bearing = ahead.z;
+    let plate_m = PLATE_NEAREST_EDGE_FACTOR * model.plate_half_width_m;
+    let distance_m = levelled_box_distance(
+        height_levelled,
+        model.body_height_m,
+        camera_height_m,
+        plate_m * cos_bearing,
+        model.top_radius_m() * cos_bearing,
+    );
+    // The base centre: the foot ray at the plate's front edge, then `plate_m` on along the
+    // horizontal direction of view.
+    let front = foot_ray * ((distance_m - plate_m * cos_bearing) / foot_ray.z);
+    let base_in_camera = Point3::from(level_from_camera.transpose() * (front + ahead * plate_m));
+    let depth_m = base_in_camera.z;
     // The foot: the box's bottom centre is the front of the base, and labellers and detectors
     // place it to a few pixels; a tenth of the box width (at least one pixel).
     let width_px = b.x_max_px - b.x_min_px;
     let foot_sigma = (0.1 * width_px).max(1.0) / camera.fy_px;
+    // The box's own error, and the plate's unknown yaw (its front edge anywhere from a face to
+    // a corner), which moves the range by c / H times the edge's spread.
+    let yaw_sigma_m = camera_height_m * PLATE_NEAREST_EDGE_SPREAD * model.plate_half_width_m
+        / model.body_height_m;
     Ok(BoxDepth {
         depth_m,
-        sigma_m: BOX_RANGE_RELATIVE_SIGMA * depth_m,
+        sigma_m: (BOX_RANGE_RELATIVE_SIGMA * depth_m).hypot(yaw_sigma_m),
         foot_normalized: foot,
         foot_sigma,
-        base_radius_m: model.plate_half_width_m,
+        base_radius_m: plate_m,
+        base_in_camera,
     })
+}
+
+/// The horizontal distance `D` of the cone axis whose box is `height` tall in levelled
+/// normalised rows (module docs): the root of `c / (D - p) - (c - H) / (D - r) - height`,
+/// which falls strictly from `+inf` just beyond `max(p, r)` to `-height` far away. Newton
+/// steps from the one-line formula's guess, kept inside a shrinking bracket.
+fn levelled_box_distance(
+    height: f64,
+    body_height_m: f64,
+    camera_height_m: f64,
+    plate_m: f64,
+    top_radius_m: f64,
+) -> f64 {
+    let (c, big_h, p, r) = (camera_height_m, body_height_m, plate_m, top_radius_m);
+    let residual = |d: f64| c / (d - p) - (c - big_h) / (d - r) - height;
+    let slope = |d: f64| -c / (d - p).powi(2) + (c - big_h) / (d - r).powi(2);
+    let floor = p.max(r);
+    let mut lo = floor + 1e-9;
+    let mut hi = floor + big_h / height + c * p / big_h + 1.0;
+    while residual(hi) > 0.0 {
+        hi = 2.0 * hi;
+    }
+    let mut d = (big_h / height + c * p / big_h).clamp(lo, hi);
+    for _ in 0..60 {
+        let f = residual(d);
+        if f > 0.0 {
+            lo = d;
+        } else {
+            hi = d;
+        }
+        let step = f / slope(d);
+        let next = d - step;
+        d = if next > lo && next < hi {
+            next
+        } else {
+            0.5 * (lo + hi)
+        };
+        if (hi - lo) < 1e-9 * d || step.abs() < 1e-12 * d {
+            break;
+        }
+    }
+    d
+}
+
+/// The rotation from the camera frame into a frame whose -y is `up` and whose z is the
+/// camera's forward direction made horizontal.
+fn level_rotation(up_in_camera: &Vector3<f64>) -> Matrix3<f64> {
+    let down = -up_in_camera.normalize();
+    let forward = Vector3::z() - down * down.z;
+    let forward = if forward.norm() > 1e-9 {
+        forward.normalize()
+    } else {
+        Vector3::x()
+    };
+    let right = down.cross(&forward);
+    Matrix3::from_rows(&[right.transpose(), down.transpose(), forward.transpose()])
 }
 
 /// A cone placed from its box alone: the base centre on the ray through the box's bottom
@@ -135,7 +256,6 @@ pub fn box_estimate(depth: &BoxDepth, up_in_camera: &Vector3<f64>) -> ConeEstima
     // The box's bottom is the front of the base, `r` nearer than the base centre: the foot ray
     // is taken at depth z - r, the base centre r behind it.
     let r = depth.base_radius_m.min(0.5 * z);
-    let position_in_camera = Point3::new(n.x * (z - r), n.y * (z - r), z);
     // p = ((z - r) n_x, (z - r) n_y, z): Jacobian with respect to (z, n_x, n_y).
     let jacobian = Matrix3::new(n.x, z - r, 0.0, n.y, 0.0, z - r, 1.0, 0.0, 0.0);
     let inputs = Matrix3::from_diagonal(&Vector3::new(
@@ -144,7 +264,7 @@ pub fn box_estimate(depth: &BoxDepth, up_in_camera: &Vector3<f64>) -> ConeEstima
         depth.foot_sigma.powi(2),
     ));
     ConeEstimate {
-        position_in_camera,
+        position_in_camera: depth.base_in_camera,
         covariance_m2: jacobian * inputs * jacobian.transpose(),
         axis_in_camera: up_in_camera.normalize(),
         tilt_rad: 0.0,
@@ -182,10 +302,21 @@ pub fn locate_cone(
     cone_box: Option<&ConeBox>,
     reference_sigma_px: f64,
 ) -> Result<(ConeEstimate, Ranging), GeometryError> {
-    let depth = cone_box.and_then(|b| box_depth(&solver.camera, model, b).ok());
-    let solved = solver
-        .solve(observation)
-        .map(|e| super::add_common_mode(&e, observation, &solver.camera, reference_sigma_px));
+    let params = &solver.params;
+    let depth = cone_box.and_then(|b| {
+        box_depth(
+            &solver.camera,
+            model,
+            b,
+            &params.up_in_camera,
+            params.camera_height_m,
+        )
+        .ok()
+    });
+    let solved = solver.solve(observation).map(|e| {
+        let e = super::add_common_mode(&e, observation, &solver.camera, reference_sigma_px);
+        super::add_scale_error(&e, observation)
+    });
     match (solved, depth) {
         (Ok(estimate), Some(depth)) => {
             Ok((fuse_box_depth(&estimate, &depth), Ranging::KeypointsAndBox))
@@ -208,17 +339,25 @@ mod tests {
         Camera::pinhole(1920, 1200, 1400.0)
     }
 
+    const LEVEL_UP: Vector3<f64> = Vector3::new(0.0, -1.0, 0.0);
+
     /// The box of a small cone standing `depth` ahead and `lateral` to the side of a level
-    /// camera `height` above the road: top at the apex, bottom at the front of the base.
+    /// camera `height` above the road: top at the front of the body's top, bottom at the
+    /// plate's (mean) front edge on the road.
     fn cone_box(depth: f64, lateral: f64, height: f64) -> ConeBox {
         let model = ConeModel::small();
         let cam = camera();
+        let plate = PLATE_NEAREST_EDGE_FACTOR * model.plate_half_width_m;
         let base = Point3::new(lateral, height, depth);
-        let apex = Point3::new(lateral, height - model.body_height_m, depth);
-        let front = Point3::new(lateral, height, depth - model.keypoint_radii_m[0]);
-        let top = cam.project(&apex).unwrap();
+        // Nearer along the horizontal direction of view.
+        let towards_camera = -Vector3::new(lateral, 0.0, depth).normalize();
+        let top = base
+            + Vector3::new(0.0, -model.body_height_m, 0.0)
+            + towards_camera * model.top_radius_m();
+        let front = base + towards_camera * plate;
+        let top = cam.project(&top).unwrap();
         let bottom = cam.project(&front).unwrap();
-        let half_width = cam.fx_px * model.keypoint_radii_m[0] / depth;
+        let half_width = cam.fx_px * model.plate_half_width_m / depth;
         let u = cam.project(&base).unwrap().x;
         ConeBox {
             x_min_px: u - half_width,
@@ -229,15 +368,47 @@ mod tests {
     }
 
     #[test]
-    fn box_height_gives_the_depth_within_a_few_percent() {
+    fn box_height_gives_the_depth_where_the_one_line_formula_reads_short() {
         let model = ConeModel::small();
-        for (depth, tolerance) in [(4.0, 0.07), (10.0, 0.03), (25.0, 0.02)] {
-            let measured = box_depth(&camera(), &model, &cone_box(depth, 1.5, 1.0)).unwrap();
-            // The box bottom is the front of the base, lower in the image than the base centre
-            // for a camera above the cone: short by 5.5 % at 4 m, by less farther away.
-            assert!(measured.depth_m < depth);
-            assert_relative_eq!(measured.depth_m, depth, max_relative = tolerance);
-            assert_relative_eq!(measured.sigma_m, 0.07 * measured.depth_m);
+        let cam = camera();
+        for depth in [3.0, 4.0, 10.0, 25.0] {
+            let b = cone_box(depth, 1.5, 1.0);
+            let measured = box_depth(&cam, &model, &b, &LEVEL_UP, 1.0).unwrap();
+            assert_relative_eq!(measured.depth_m, depth, max_relative = 1e-3);
+            assert_relative_eq!(measured.base_in_camera.x, 1.5, epsilon = 0.02);
+            let yaw = 0.1245 * model.plate_half_width_m / model.body_height_m;
+            assert_relative_eq!(
+                measured.sigma_m,
+                (0.04 * measured.depth_m).hypot(yaw),
+                epsilon = 1e-9
+            );
+            // The one-line formula takes the plate's front edge at the base's depth: it reads
+            // up to c p / H (0.45 m here; less off to the side) short.
+            let one_line = cam.fy_px * model.body_height_m / (b.y_max_px - b.y_min_px);
+            let short = depth - one_line;
+            assert!(
+                (0.3..0.5).contains(&short),
+                "{depth} m: one-line short by {short}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_wrong_camera_height_or_pitch_costs_little() {
+        let model = ConeModel::small();
+        let b = cone_box(8.0, 0.5, 1.0);
+        for (height, up, tolerance) in [
+            (1.3, LEVEL_UP, 0.02),
+            (0.7, LEVEL_UP, 0.02),
+            // Pitched 5 degrees the wrong way.
+            (
+                1.0,
+                Vector3::new(0.0, -(5f64.to_radians().cos()), 5f64.to_radians().sin()),
+                0.01,
+            ),
+        ] {
+            let measured = box_depth(&camera(), &model, &b, &up, height).unwrap();
+            assert_relative_eq!(measured.depth_m, 8.0, max_relative = tolerance);
         }
     }
 
@@ -246,22 +417,27 @@ mod tests {
         let model = ConeModel::small();
         let mut cut = cone_box(3.0, 0.0, 1.0);
         cut.y_max_px = 1200.0;
-        let error = box_depth(&camera(), &model, &cut).unwrap_err().to_string();
+        let error = box_depth(&camera(), &model, &cut, &LEVEL_UP, 1.0)
+            .unwrap_err()
+            .to_string();
         assert!(error.contains("top or bottom edge"), "{error}");
         let mut nan = cone_box(3.0, 0.0, 1.0);
         nan.x_min_px = f64::NAN;
-        assert!(box_depth(&camera(), &model, &nan).is_err());
+        assert!(box_depth(&camera(), &model, &nan, &LEVEL_UP, 1.0).is_err());
+        let good = cone_box(3.0, 0.0, 1.0);
+        assert!(box_depth(&camera(), &model, &good, &LEVEL_UP, 0.0).is_err());
+        assert!(box_depth(&camera(), &model, &good, &LEVEL_UP, f64::NAN).is_err());
     }
 
     #[test]
     fn box_estimate_lies_on_the_foot_ray_with_depth_variance_along_it() {
         let model = ConeModel::small();
-        let depth = box_depth(&camera(), &model, &cone_box(12.0, 2.0, 1.0)).unwrap();
-        let estimate = box_estimate(&depth, &Vector3::new(0.0, -1.0, 0.0));
+        let depth =
+            box_depth(&camera(), &model, &cone_box(12.0, 2.0, 1.0), &LEVEL_UP, 1.0).unwrap();
+        let estimate = box_estimate(&depth, &LEVEL_UP);
         let p = estimate.position_in_camera;
         assert_relative_eq!(p.z, depth.depth_m);
-        let foot_depth = p.z - depth.base_radius_m;
-        assert_relative_eq!(p.x / foot_depth, depth.foot_normalized.x, epsilon = 1e-12);
+        assert_relative_eq!(p.x, 2.0, epsilon = 0.01);
         assert_relative_eq!(
             estimate.covariance_m2[(2, 2)],
             depth.sigma_m.powi(2),
@@ -273,8 +449,9 @@ mod tests {
     #[test]
     fn fusion_weighs_by_variance_and_never_widens() {
         let model = ConeModel::small();
-        let depth = box_depth(&camera(), &model, &cone_box(20.0, 0.0, 1.0)).unwrap();
-        let mut pnp = box_estimate(&depth, &Vector3::new(0.0, -1.0, 0.0));
+        let depth =
+            box_depth(&camera(), &model, &cone_box(20.0, 0.0, 1.0), &LEVEL_UP, 1.0).unwrap();
+        let mut pnp = box_estimate(&depth, &LEVEL_UP);
         pnp.position_in_camera.z = 22.0;
         // PnP as sure as the box: the fused depth is halfway, the variance halved.
         pnp.covariance_m2 =

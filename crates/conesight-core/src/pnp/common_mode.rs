@@ -8,6 +8,10 @@
 //! 20-30 m outside the chi-square 95 % bound, mostly sideways. [`add_common_mode`] adds a shared
 //! shift of [`COMMON_MODE_SIGMA_FRACTION`] times the keypoints' median sigma, across the line of
 //! sight.
+//!
+//! The set is also often a little too big or too small, which moves the cone along the line of
+//! sight by that share of its range: [`add_scale_error`] adds it, with the relative sigma
+//! measured on real frames ([`keypoint_scale_sigma`]).
 
 use nalgebra::Vector3;
 
@@ -47,6 +51,38 @@ pub fn add_common_mode(
     out
 }
 
+/// The keypoint range's relative sigma on real frames that does not shrink with the cone's
+/// size (the network's and the labellers' own scale error).
+pub const KEYPOINT_SCALE_SIGMA_FLOOR: f64 = 0.012;
+/// The part that does, as pixels of the apex-to-base span: `0.7 / span_px`.
+pub const KEYPOINT_SCALE_SIGMA_SPAN_PX: f64 = 0.7;
+
+/// Relative standard deviation of the range from a cone's keypoints whose apex-to-base span is
+/// `span_px`: `hypot(KEYPOINT_SCALE_SIGMA_FLOOR, KEYPOINT_SCALE_SIGMA_SPAN_PX / span_px)`.
+/// Fitted to the three-cornered hat of keypoints, detector boxes and labelled boxes on the
+/// real FSOCO valid and train splits (models/keypoints.md): 7.5 % for boxes under 15 px, 3-4 %
+/// at 15-30 px, 2 % at 40-80 px, 1-1.5 % above. The solver's covariance alone said 1.5 % for
+/// every size.
+pub fn keypoint_scale_sigma(span_px: f64) -> f64 {
+    KEYPOINT_SCALE_SIGMA_FLOOR.hypot(KEYPOINT_SCALE_SIGMA_SPAN_PX / span_px.max(1.0))
+}
+
+/// `estimate` with the keypoints' shared scale error added to its covariance along the line of
+/// sight (module docs).
+pub fn add_scale_error(estimate: &ConeEstimate, observation: &ConeObservation) -> ConeEstimate {
+    let k = &observation.keypoints_px;
+    let base = nalgebra::center(&k[3], &k[6]);
+    let span_px = (k[0] - base).norm();
+    let p = estimate.position_in_camera.coords;
+    let (Some(ray), true) = (p.try_normalize(1e-12), span_px.is_finite()) else {
+        return *estimate;
+    };
+    let sigma_m = keypoint_scale_sigma(span_px) * p.norm();
+    let mut out = *estimate;
+    out.covariance_m2 += sigma_m * sigma_m * ray * ray.transpose();
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -73,5 +109,35 @@ mod tests {
         assert!((near.covariance_m2[(1, 1)].sqrt() - 0.01).abs() < 1e-12);
         assert!(near.covariance_m2[(2, 2)].abs() < 1e-15);
         assert!((far.covariance_m2[(0, 0)].sqrt() - 0.02).abs() < 1e-12);
+    }
+
+    #[test]
+    fn scale_error_lies_along_the_ray_and_shrinks_with_the_cone_s_size() {
+        assert!((keypoint_scale_sigma(10.0) - 0.0710).abs() < 1e-3);
+        assert!((keypoint_scale_sigma(1000.0) - 0.012).abs() < 1e-3);
+        let cone = |span: f64| {
+            let mut observation = ConeObservation::new([Point2::origin(); 7]);
+            observation.keypoints_px[0] = Point2::new(0.0, -span);
+            observation
+        };
+        let estimate = ConeEstimate {
+            position_in_camera: Point3::new(3.0, 1.0, 20.0),
+            covariance_m2: Matrix3::zeros(),
+            axis_in_camera: Vector3::new(0.0, -1.0, 0.0),
+            tilt_rad: 0.0,
+            reprojection_rms_px: 0.0,
+            inliers: [true; 7],
+            iterations: 1,
+        };
+        let small = add_scale_error(&estimate, &cone(12.0));
+        let large = add_scale_error(&estimate, &cone(120.0));
+        let ray = estimate.position_in_camera.coords.normalize();
+        let along = |e: &ConeEstimate| (ray.transpose() * e.covariance_m2 * ray)[(0, 0)].sqrt();
+        let range = estimate.position_in_camera.coords.norm();
+        assert!((along(&small) / range - keypoint_scale_sigma(12.0)).abs() < 1e-9);
+        assert!(along(&large) < along(&small));
+        // Nothing across the ray.
+        let across = Vector3::y().cross(&ray).normalize();
+        assert!((across.transpose() * small.covariance_m2 * across)[(0, 0)].abs() < 1e-12);
     }
 }

@@ -27,7 +27,9 @@ pub use box_range::{
     BOX_RANGE_RELATIVE_SIGMA, BoxDepth, ConeBox, Ranging, box_depth, box_estimate, fuse_box_depth,
     locate_cone,
 };
-pub use common_mode::{COMMON_MODE_SIGMA_FRACTION, add_common_mode};
+pub use common_mode::{
+    COMMON_MODE_SIGMA_FRACTION, add_common_mode, add_scale_error, keypoint_scale_sigma,
+};
 pub use cone::{ConeSolver, predicted_keypoints, solve_cone};
 pub use epnp::epnp;
 pub use generic::{PnpSolution, solve_pnp};

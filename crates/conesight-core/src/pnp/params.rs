@@ -73,6 +73,18 @@ pub struct ConePnpParams {
     pub estimate_tilt: bool,
     /// Prior standard deviation of the tilt, radians.
     pub tilt_prior_sigma_rad: f64,
+    /// Height of the camera above the road, metres: the box-height range accounts with it for
+    /// the base plate's front edge, which is nearer and lower than the base centre (1.0, the
+    /// paper's mounting, unless the extrinsics say otherwise).
+    #[serde(default = "default_camera_height_m")]
+    pub camera_height_m: f64,
+}
+
+/// The paper's camera height above the road, metres.
+pub const DEFAULT_CAMERA_HEIGHT_M: f64 = 1.0;
+
+fn default_camera_height_m() -> f64 {
+    DEFAULT_CAMERA_HEIGHT_M
 }
 
 /// Default keypoint noise, pixels (a keypoint network on 80x80 patches).
@@ -104,6 +116,7 @@ impl ConePnpParams {
             ground_plane: None,
             estimate_tilt: false,
             tilt_prior_sigma_rad: 0.1,
+            camera_height_m: DEFAULT_CAMERA_HEIGHT_M,
         }
     }
 
@@ -112,6 +125,7 @@ impl ConePnpParams {
     pub fn with_extrinsics(mut self, extrinsics: &Extrinsics, on_ground_plane: bool) -> Self {
         let plane = GroundPlane::from_extrinsics(extrinsics);
         self.up_in_camera = plane.up_in_camera;
+        self.camera_height_m = plane.camera_height_m;
         self.ground_plane = on_ground_plane.then_some(plane);
         self
     }

@@ -50,10 +50,7 @@ impl SilhouetteModel {
             let level = keypoint.level();
             heights_m[i] = model.keypoint_heights_m[level];
             (radii_m[i], sides[i]) = match keypoint {
-                Keypoint::Apex => {
-                    heights_m[i] = model.body_height_m;
-                    (0.0, 0.0)
-                }
+                Keypoint::Apex => (0.0, 0.0),
                 Keypoint::LeftUpper | Keypoint::LeftLower | Keypoint::LeftBase => {
                     (model.keypoint_radii_m[level], -1.0)
                 }
