@@ -7,8 +7,11 @@ network cannot reach it, closer than `edge_px` to the patch border, is drawn aga
 `geometric_tries` times, else the patch stays as it is), horizontal mirror (left/right
 keypoints swap), truncation (a band at one side replaced by the crop rule's fill, as when a
 cone leaves the image), a neighbouring cone pasted at a side.
-Photometric: per-channel colour gain and offset, gamma, Gaussian or motion blur, sensor noise,
-JPEG re-compression. Every draw comes from the Generator passed in, so results are seeded.
+Photometric: exposure (one gain for the whole patch, under- and over-exposed, with a glare
+wash), per-channel colour gain and offset, gamma, Gaussian or motion blur, sensor noise, JPEG
+re-compression, and low resolution (the patch taken down until the cone is 15-40 px tall and
+blown up again, as the crop rule does for a far cone). Every draw comes from the Generator
+passed in, so results are seeded.
 
 Box jitter done here re-samples the patch, so context outside it is mirrored from inside
 (BORDER_REFLECT_101); jittering the box in the full image at render time
@@ -57,6 +60,14 @@ class AugmentParams:
     noise_sigma_max: float = 8.0
     p_jpeg: float = 0.4
     jpeg_quality_range: tuple[int, int] = (30, 95)
+    # Exposure: one gain for all channels (a dark or a bright camera), and a glare wash.
+    p_exposure: float = 0.3
+    exposure_gain_range: tuple[float, float] = (0.45, 1.8)
+    p_glare: float = 0.1
+    glare_max: float = 90.0
+    # Low resolution: the cone's height in the source (the patch shows it ~65 px tall).
+    p_low_resolution: float = 0.3
+    low_resolution_cone_px: tuple[float, float] = (15.0, 40.0)
 
 
 def _geometric(
@@ -124,8 +135,29 @@ def _neighbour(patch: np.ndarray, other: np.ndarray, rng: np.random.Generator) -
     return out
 
 
+def low_resolution(image: np.ndarray, cone_px: float) -> np.ndarray:
+    """The patch as a far cone `cone_px` tall gives it: area-down, bilinear up again."""
+    side = image.shape[0]
+    small = max(4, round(side * cone_px / PATCH_CONE_PX))
+    if small >= side:
+        return image
+    down = cv2.resize(image, (small, small), interpolation=cv2.INTER_AREA)
+    return cv2.resize(down, (side, side), interpolation=cv2.INTER_LINEAR)
+
+
+# How tall a cone framed by the crop rule shows in the 80x80 patch (1/1.2 of the side, minus
+# the labellers' margin), pixels.
+PATCH_CONE_PX = 65.0
+
+
 def photometric(image: np.ndarray, rng: np.random.Generator, p: AugmentParams) -> np.ndarray:
+    if rng.random() < p.p_low_resolution:
+        image = low_resolution(image, rng.uniform(*p.low_resolution_cone_px))
     x = image.astype(np.float32)
+    if rng.random() < p.p_exposure:
+        x = x * rng.uniform(*p.exposure_gain_range)
+    if rng.random() < p.p_glare:
+        x = x + rng.uniform(0.0, p.glare_max) * (1.0 - x / 255.0).clip(0.0, 1.0)
     if rng.random() < p.p_colour:
         gain = rng.uniform(*p.colour_gain_range, size=3).astype(np.float32)
         offset = rng.uniform(-p.colour_offset_max, p.colour_offset_max, size=3).astype(np.float32)

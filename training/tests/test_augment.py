@@ -18,6 +18,9 @@ GEOMETRY_ONLY = AugmentParams(
     p_blur=0.0,
     p_noise=0.0,
     p_jpeg=0.0,
+    p_exposure=0.0,
+    p_glare=0.0,
+    p_low_resolution=0.0,
     scale_range=(0.85, 1.15),
     shift_fraction=0.06,
 )
@@ -90,3 +93,44 @@ def test_paper_floor_rotates_and_keeps_every_keypoint_reachable():
         tilts.append(np.degrees(np.arctan2(axis[0], -axis[1])))
     assert max(np.abs(tilts)) > 8.0  # rotations of the cone axis are drawn
     assert max(np.abs(tilts)) <= 15.0 + 1.0
+
+
+def test_low_resolution_keeps_the_size_and_loses_the_detail_of_a_far_cone():
+    from conesight_train.augment import low_resolution
+
+    rng = np.random.default_rng(0)
+    patch = rng.integers(0, 256, size=(80, 80, 3), dtype=np.uint8)
+    blurred = low_resolution(patch, 15.0)
+    assert blurred.shape == patch.shape and blurred.dtype == np.uint8
+
+    # Fine noise is averaged away: far less spread between neighbouring pixels.
+    def roughness(x: np.ndarray) -> float:
+        return float(np.abs(np.diff(x.astype(np.float32), axis=1)).mean())
+
+    assert roughness(blurred) < 0.3 * roughness(patch)
+    # A cone already that coarse is left alone.
+    assert np.array_equal(low_resolution(patch, 200.0), patch)
+
+
+def test_exposure_darkens_and_brightens_whole_patches():
+    only_exposure = AugmentParams(
+        p_geometric=0.0,
+        p_mirror=0.0,
+        p_truncate=0.0,
+        p_neighbour=0.0,
+        p_colour=0.0,
+        p_gamma=0.0,
+        p_blur=0.0,
+        p_noise=0.0,
+        p_jpeg=0.0,
+        p_low_resolution=0.0,
+        p_glare=0.0,
+        p_exposure=1.0,
+    )
+    patch = np.full((80, 80, 3), 120, np.uint8)
+    sample = KeypointPatch(patch, dots_patch().keypoints_px)
+    means = [
+        float(PhotoAugment(only_exposure)(sample, np.random.default_rng(seed)).patch_rgb.mean())
+        for seed in range(40)
+    ]
+    assert min(means) < 80 and max(means) > 170

@@ -8,7 +8,7 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
-use conesight_core::{Camera, Extrinsics};
+use conesight_core::{Camera, ConeGeometry, Extrinsics};
 use conesight_detect::EgoMask;
 use conesight_onnx::ModelOptions;
 use conesight_pipeline::boxes::read_boxes;
@@ -66,6 +66,12 @@ pub struct PredictArgs {
     /// Constrain cone bases to the road plane of the extrinsics.
     #[arg(long = "ground-plane")]
     ground_plane: bool,
+    /// Your cones' sizes and keypoint heights, per size or class (YAML: `small:`/`large:` or
+    /// `blue:`.. with height_m, plate_half_width_m, plate_height_m, keypoint_heights_m {base,
+    /// lower_stripe, upper_stripe, apex}, body_radius_m {base, apex}, scale); default: the
+    /// shipped geometry, fitted to real FSOCO cones (models/keypoints.md).
+    #[arg(long = "cone-geometry", env = "CONESIGHT_CONE_GEOMETRY")]
+    cone_geometry: Option<PathBuf>,
     /// Image files (PNG, JPEG, ...).
     #[arg(required = true)]
     images: Vec<PathBuf>,
@@ -102,6 +108,10 @@ pub fn run(args: &PredictArgs) -> anyhow::Result<()> {
         },
         on_ground_plane: args.ground_plane,
         ego_mask: args.ego_mask.as_deref().map(EgoMask::parse).transpose()?,
+        cone_geometry: match &args.cone_geometry {
+            Some(path) => ConeGeometry::from_yaml_file(path)?,
+            None => ConeGeometry::shipped(),
+        },
     };
     let mut pipeline = InProcessPipeline::load(&config, &camera, &extrinsics)?;
     let assumed_camera = args.camera.is_none();

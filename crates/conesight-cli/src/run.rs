@@ -126,6 +126,10 @@ pub struct RunArgs {
     /// Constrain cone bases to the road plane.
     #[arg(long = "ground-plane")]
     ground_plane: bool,
+    /// Your cones' sizes and keypoint heights (YAML, as `conesight predict --cone-geometry`);
+    /// default: the shipped geometry fitted to real cones.
+    #[arg(long = "cone-geometry", env = "CONESIGHT_CONE_GEOMETRY")]
+    cone_geometry: Option<std::path::PathBuf>,
     /// Serve /livez, /readyz, /metrics of the services on consecutive ports from this one
     /// (camera, detector, keypoints, localiser order); none when absent.
     #[arg(long = "http-base-port")]
@@ -307,6 +311,7 @@ async fn run_async(args: RunArgs) -> anyhow::Result<()> {
             _ => {
                 let mut service = LocaliserArgs::new(common(name));
                 service.ground_plane = args.ground_plane;
+                service.cone_geometry = args.cone_geometry.clone();
                 tokio::spawn(async move {
                     conesight_localiser_service::run(&service, node, shutdown).await
                 })

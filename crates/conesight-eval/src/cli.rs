@@ -57,6 +57,13 @@ pub struct EvalArgs {
     /// ONNX Runtime intra-op threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Real labelled frames to range (the `fsoco-boxes` folder: data.yaml, <split>/images,
+    /// <split>/labels); skipped with a message when absent.
+    #[arg(long)]
+    pub real_boxes: Option<PathBuf>,
+    /// Splits of `--real-boxes` to run.
+    #[arg(long, value_delimiter = ',', default_values_t = [String::from("train"), String::from("valid"), String::from("test")])]
+    pub real_splits: Vec<String>,
 }
 
 impl EvalArgs {
@@ -100,6 +107,13 @@ impl EvalArgs {
                 jitter: self.patch_jitter,
             }),
             threads: self.threads,
+            real: self
+                .real_boxes
+                .as_ref()
+                .map(|root| crate::real::RealConfig {
+                    root: root.clone(),
+                    splits: self.real_splits.clone(),
+                }),
         })
     }
 }

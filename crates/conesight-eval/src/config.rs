@@ -47,6 +47,8 @@ pub struct EvalConfig {
     pub patches: Option<PatchSet>,
     /// ONNX Runtime intra-op threads (`None`: all cores).
     pub threads: Option<usize>,
+    /// Real labelled frames to range (`None`: none; skipped when the folder is absent).
+    pub real: Option<crate::real::RealConfig>,
 }
 
 /// A held-out patch folder for `conesight_train.eval_keypoints`.
@@ -79,6 +81,7 @@ impl Default for EvalConfig {
             perturbation_seed: 2019,
             patches: None,
             threads: None,
+            real: None,
         }
     }
 }

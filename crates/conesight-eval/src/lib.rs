@@ -14,6 +14,8 @@
 //! - [`perturb`] draws the seeded box-edge perturbations.
 //! - [`detection`] runs the detector down to a low score floor for AP, and at its operating
 //!   threshold for the pipeline.
+//! - [`real`] ranges labelled real frames by each cue (keypoints, box, fused): the real
+//!   consistency check.
 //! - [`records`] defines the JSONL records (the contract with the Python report).
 //! - [`bands`] makes range bands and the console summary table.
 //! - [`cli`] parses `conesight-eval` / `conesight eval` arguments.
@@ -25,6 +27,7 @@ pub mod cli;
 pub mod config;
 pub mod detection;
 pub mod perturb;
+pub mod real;
 pub mod records;
 pub mod run;
 pub mod variants;

@@ -11,6 +11,7 @@
 //! | `detections.jsonl` | frame (with a detector) | [`DetectionFrameRecord`] |
 //! | `pipeline.jsonl` | frame (with a detector): detector -> keypoints -> PnP | [`PipelineFrameRecord`] |
 //! | `timing.jsonl` | frame: production keypoints + PnP on the exact boxes | [`TimingRecord`] |
+//! | `real_cones.jsonl` | labelled real cone (and detector box matched to it): range per cue | [`crate::real::RealConeRecord`] |
 //! | `meta.json` | the run | [`Meta`] |
 
 use std::collections::BTreeMap;
@@ -308,6 +309,8 @@ pub struct Meta {
     pub planar_object_points_m: BTreeMap<String, Vec<[f64; 3]>>,
     /// The camera matrix and plumb_bob distortion of the paper camera.
     pub camera: CameraEntry,
+    /// The real-frame run (`real_cones.jsonl`), when one was asked for and its data found.
+    pub real: Option<crate::real::RealSummary>,
 }
 
 /// The camera, as OpenCV takes it.

@@ -97,7 +97,7 @@ fn class_id(class: ConeClass) -> usize {
         .unwrap_or_default()
 }
 
-fn bar(len: u64, what: &str) -> ProgressBar {
+pub(crate) fn bar(len: u64, what: &str) -> ProgressBar {
     let bar = ProgressBar::new(len);
     if let Ok(style) = ProgressStyle::with_template(&format!(
         "{what} {{pos}}/{{len}} [{{elapsed}} < {{eta}}] {{wide_bar}}"
@@ -497,8 +497,30 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Meta> {
         let size = if class.is_large() { "large" } else { "small" };
         planar.insert(size.to_owned(), variants_points(&camera, class)?);
     }
+    let real = match &config.real {
+        Some(real) if real.root.join("data.yaml").is_file() => Some(
+            crate::real::run_real(
+                real,
+                &config.keypoint_models[0].path,
+                config.detector.as_deref().filter(|p| p.is_file()),
+                &conesight_core::ConeGeometry::shipped(),
+                &onnx,
+                &config.out,
+            )
+            .context("real frames")?,
+        ),
+        Some(real) => {
+            eprintln!(
+                "real frames: {} not found (no ../shared?); skipped",
+                real.root.join("data.yaml").display()
+            );
+            None
+        }
+        None => None,
+    };
     let meta = Meta {
         config: config.clone(),
+        real,
         models,
         ap_score_floor: f64::from(AP_SCORE_FLOOR),
         operating_score_threshold: detector

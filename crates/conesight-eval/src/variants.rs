@@ -99,8 +99,9 @@ impl Variants {
             ConeModel::small()
         };
         let start = Instant::now();
-        let depth = box_depth(&self.camera, &model, cone_box);
-        let up = self.cone[size].params().up_in_camera;
+        let params = self.cone[size].params();
+        let up = params.up_in_camera;
+        let depth = box_depth(&self.camera, &model, cone_box, &up, params.camera_height_m);
         let box_micros = start.elapsed().as_secs_f64() * 1e6;
         out.insert(
             "box_height".to_owned(),

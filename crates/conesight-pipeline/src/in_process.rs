@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-use conesight_core::{Camera, Extrinsics};
+use conesight_core::{Camera, ConeGeometry, Extrinsics};
 use conesight_detect::EgoMask;
 use conesight_onnx::ModelOptions;
 use conesight_proto::{ConeDetection, ConeKeypoints, LocatedCone};
@@ -31,6 +31,8 @@ pub struct PipelineConfig {
     pub on_ground_plane: bool,
     /// Where the car itself shows: detections standing there are dropped.
     pub ego_mask: Option<EgoMask>,
+    /// The cones' sizes and keypoint heights (`--cone-geometry`; the fitted defaults).
+    pub cone_geometry: ConeGeometry,
 }
 
 /// Wall time of each stage for one frame.
@@ -98,7 +100,12 @@ impl InProcessPipeline {
         Ok(Self {
             detector,
             keypoints: KeypointStage::load(&keypoint_model, &config.onnx)?,
-            localiser: LocaliserStage::new(camera, extrinsics, config.on_ground_plane)?,
+            localiser: LocaliserStage::new(
+                camera,
+                extrinsics,
+                config.on_ground_plane,
+                &config.cone_geometry,
+            )?,
             on_ground_plane: config.on_ground_plane,
         })
     }
@@ -127,7 +134,8 @@ impl InProcessPipeline {
         if self.localiser.camera() == camera && self.localiser.extrinsics() == extrinsics {
             return Ok(());
         }
-        self.localiser = LocaliserStage::new(camera, extrinsics, self.on_ground_plane)?;
+        let geometry = *self.localiser.geometry();
+        self.localiser = LocaliserStage::new(camera, extrinsics, self.on_ground_plane, &geometry)?;
         Ok(())
     }
 

@@ -8,7 +8,9 @@
 //! by the image's top or bottom edge gives no depth; such a cone needs its keypoints.
 
 use conesight_core::pnp::{ConeBox, locate_cone};
-use conesight_core::{Camera, ConeModel, ConePnpParams, ConeSolver, Extrinsics, GeometryError};
+use conesight_core::{
+    Camera, ConeClass, ConeGeometry, ConePnpParams, ConeSolver, Extrinsics, GeometryError,
+};
 use conesight_proto::{ConeKeypoints, LocatedCone};
 
 use crate::error::PipelineError;
@@ -41,28 +43,38 @@ pub struct LocaliserOutput {
 pub struct LocaliserStage {
     camera: Camera,
     extrinsics: Extrinsics,
-    small: ConeSolver,
-    large: ConeSolver,
+    geometry: ConeGeometry,
+    /// One per class, indexed by [`ConeClass::index`].
+    solvers: [ConeSolver; 4],
     box_ranging: bool,
 }
 
 impl LocaliserStage {
-    /// Solvers for `camera` mounted by `extrinsics`; the cone axis comes from the extrinsics
-    /// and, with `on_ground_plane`, the base is constrained to the road plane.
+    /// Solvers for `camera` mounted by `extrinsics`, one per class of `geometry`; the cone
+    /// axis and the camera's height come from the extrinsics and, with `on_ground_plane`, the
+    /// base is constrained to the road plane.
     pub fn new(
         camera: &Camera,
         extrinsics: &Extrinsics,
         on_ground_plane: bool,
+        geometry: &ConeGeometry,
     ) -> Result<Self, PipelineError> {
         let params = ConePnpParams::for_keypoint_sigma(REFERENCE_SIGMA_PX)
             .with_extrinsics(extrinsics, on_ground_plane);
+        let [blue, yellow, orange, large_orange] =
+            ConeClass::ALL.map(|class| ConeSolver::new(camera, &geometry.model(class), &params));
         Ok(Self {
             camera: *camera,
             extrinsics: *extrinsics,
-            small: ConeSolver::new(camera, &ConeModel::small(), &params)?,
-            large: ConeSolver::new(camera, &ConeModel::large(), &params)?,
+            geometry: *geometry,
+            solvers: [blue?, yellow?, orange?, large_orange?],
             box_ranging: true,
         })
+    }
+
+    /// The cone geometry in use.
+    pub fn geometry(&self) -> &ConeGeometry {
+        &self.geometry
     }
 
     /// With `false`, the box height is neither fused nor used as a fallback: keypoints alone
@@ -86,11 +98,8 @@ impl LocaliserStage {
     pub fn localise(&self, cones: &[ConeKeypoints]) -> LocaliserOutput {
         let mut output = LocaliserOutput::default();
         for (index, cone) in cones.iter().enumerate() {
-            let (solver, model) = if cone.detection.class.is_large() {
-                (&self.large, ConeModel::large())
-            } else {
-                (&self.small, ConeModel::small())
-            };
+            let class = cone.detection.class;
+            let (solver, model) = (&self.solvers[class.index()], self.geometry.model(class));
             let cone_box = self
                 .box_ranging
                 .then(|| cone_box_of(&cone.detection.box_px));

@@ -6,7 +6,8 @@
 
 use conesight_core::pnp::Ranging;
 use conesight_core::{
-    Camera, ConeClass, ConeModel, ConeObservation, Extrinsics, KEYPOINT_COUNT, silhouette_keypoints,
+    Camera, ConeClass, ConeGeometry, ConeModel, ConeObservation, Extrinsics, KEYPOINT_COUNT,
+    silhouette_keypoints,
 };
 use conesight_pipeline::LocaliserStage;
 use conesight_proto::{ConeDetection, ConeKeypoints};
@@ -72,7 +73,7 @@ fn inside(camera: &Camera, cone: &Cone) -> usize {
 fn cones_cut_by_the_image_edge_with_three_keypoints_get_a_position() {
     let camera = Camera::paper_default();
     let extrinsics = Extrinsics::paper_default();
-    let stage = LocaliserStage::new(&camera, &extrinsics, false).unwrap();
+    let stage = LocaliserStage::new(&camera, &extrinsics, false, &ConeGeometry::shipped()).unwrap();
     let keypoints_only = stage.clone().with_box_ranging(false);
     // Slide a cone 6 m ahead out of the image's left edge: every position with at least three
     // keypoints in the image must be found from the keypoints alone (no "no consensus").
@@ -107,7 +108,7 @@ fn cones_cut_by_the_image_edge_with_three_keypoints_get_a_position() {
 fn box_height_is_fused_and_stands_in_when_keypoints_fail() {
     let camera = Camera::paper_default();
     let extrinsics = Extrinsics::paper_default();
-    let stage = LocaliserStage::new(&camera, &extrinsics, false).unwrap();
+    let stage = LocaliserStage::new(&camera, &extrinsics, false, &ConeGeometry::shipped()).unwrap();
     let mut c = cone(&camera, &extrinsics, 15.0, 1.0);
     let out = stage.localise(std::slice::from_ref(&c.keypoints));
     let fused = &out.cones[0].1;

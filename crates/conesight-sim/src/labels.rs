@@ -191,11 +191,15 @@ fn projected_extent(
         samples.push(Point3::new(x, y, 0.0));
         samples.push(Point3::new(x, y, model.plate_height_m));
     }
-    for level in 0..4 {
-        let (z, r) = (
-            model.keypoint_heights_m[level],
-            model.keypoint_radii_m[level],
-        );
+    let levels = (0..4)
+        .map(|level| {
+            (
+                model.keypoint_heights_m[level],
+                model.keypoint_radii_m[level],
+            )
+        })
+        .chain([(model.body_height_m, model.top_radius_m())]);
+    for (z, r) in levels {
         for i in 0..48 {
             let a = std::f64::consts::TAU * f64::from(i) / 48.0;
             samples.push(Point3::new(r * a.cos(), r * a.sin(), z));

@@ -17,7 +17,7 @@ use std::time::{Duration, Instant};
 
 use conesight_bus::zenoh::sample::Sample;
 use conesight_bus::{Stream, encode};
-use conesight_core::Extrinsics;
+use conesight_core::{ConeGeometry, Extrinsics};
 use conesight_pipeline::node::{CalibrationCell, CommonArgs, follow_camera_info};
 use conesight_pipeline::{LocaliserStage, Node, Shutdown};
 use conesight_proto::{pb, require_header};
@@ -38,6 +38,10 @@ pub struct LocaliserArgs {
     /// Constrain cone bases to the road plane of the extrinsics.
     #[arg(long = "ground-plane", env = "CONESIGHT_GROUND_PLANE")]
     pub ground_plane: bool,
+    /// Your cones' sizes and keypoint heights, per size or class (YAML; default: the shipped
+    /// geometry fitted to real FSOCO cones). See the model card models/keypoints.md.
+    #[arg(long = "cone-geometry", env = "CONESIGHT_CONE_GEOMETRY")]
+    pub cone_geometry: Option<PathBuf>,
 }
 
 impl LocaliserArgs {
@@ -47,6 +51,7 @@ impl LocaliserArgs {
             common,
             extrinsics: None,
             ground_plane: false,
+            cone_geometry: None,
         }
     }
 }
@@ -57,6 +62,10 @@ pub async fn run(args: &LocaliserArgs, node: Node, shutdown: Shutdown) -> anyhow
     let fixed_extrinsics = match &args.extrinsics {
         Some(path) => Some(Extrinsics::from_yaml_file(path)?),
         None => None,
+    };
+    let geometry = match &args.cone_geometry {
+        Some(path) => ConeGeometry::from_yaml_file(path)?,
+        None => ConeGeometry::shipped(),
     };
     let calibration = Arc::new(CalibrationCell::default());
     follow_camera_info(&node, camera, calibration.clone(), &shutdown).await?;
@@ -95,6 +104,7 @@ pub async fn run(args: &LocaliserArgs, node: Node, shutdown: Shutdown) -> anyhow
                 &camera,
                 &extrinsics.unwrap_or_else(Extrinsics::paper_default),
                 ground_plane,
+                &geometry,
             ) {
                 Ok(new_stage) => stage = Some(new_stage),
                 Err(error) => {

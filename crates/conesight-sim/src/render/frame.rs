@@ -77,7 +77,7 @@ impl Renderer {
                 })
                 .collect();
             add_shadow(&pose, plate);
-            let top_r = model.keypoint_radii_m[3];
+            let top_r = model.top_radius_m();
             let body: Vec<Point3<f64>> = circle_points(model.keypoint_radii_m[0], 0.0, 16)
                 .chain(circle_points(top_r, model.body_height_m, 12))
                 .collect();
