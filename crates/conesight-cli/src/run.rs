@@ -170,6 +170,10 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
 type Task = tokio::task::JoinHandle<anyhow::Result<()>>;
 
 async fn run_async(args: RunArgs) -> anyhow::Result<()> {
+    // A bad geometry file stops the run before any service starts.
+    if let Some(path) = &args.cone_geometry {
+        conesight_core::ConeGeometry::from_yaml_file(path)?;
+    }
     // Log lines never interleave with the live table: on a terminal they go to a file.
     let log_file = args.log_file.clone().or_else(|| {
         std::io::stdout()

@@ -210,6 +210,65 @@ fn predict_with_given_boxes_keeps_every_box() {
     }
 }
 
+/// `--cone-geometry`: the same frame and boxes with every cone declared 10 % larger puts every
+/// cone 10 % farther (the box's plate correction, which depends on the camera's height, not
+/// the cone's size, keeps it a hair under); a bad file stops predict with the field named.
+#[test]
+fn predict_with_a_larger_cone_geometry_ranges_ten_percent_farther() {
+    let dir = TempDir::new("geometry");
+    render(&dir.0);
+    let image = dir.0.join("images/000000.png");
+    let boxes = dir.0.join("labels");
+    let camera = dir.0.join("camera_info/000000.yaml");
+    let larger = dir.0.join("cones.yaml");
+    std::fs::write(&larger, "small: {scale: 1.1}\nlarge: {scale: 1.1}\n").unwrap();
+    let run = |extra: &[&str]| {
+        let mut args = vec![
+            "predict",
+            "--camera",
+            camera.to_str().unwrap(),
+            "--boxes",
+            boxes.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        args.push(image.to_str().unwrap());
+        conesight(&args)
+    };
+    let shipped = run(&[]);
+    let scaled = run(&["--cone-geometry", larger.to_str().unwrap()]);
+    assert!(shipped.status.success() && scaled.status.success());
+    let ranges = |output: &Output| -> Vec<Option<f64>> {
+        json_lines(output)[0]["cones"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|c| c["range_m"].as_f64())
+            .collect()
+    };
+    let pairs: Vec<(f64, f64)> = ranges(&shipped)
+        .into_iter()
+        .zip(ranges(&scaled))
+        .filter_map(|(a, b)| Some((a?, b?)))
+        .collect();
+    assert!(pairs.len() >= 5, "{} cones ranged", pairs.len());
+    for (a, b) in pairs {
+        let ratio = b / a;
+        assert!(
+            (1.09..=1.101).contains(&ratio),
+            "{a:.3} m -> {b:.3} m ({ratio:.4})"
+        );
+    }
+    let bad = dir.0.join("bad.yaml");
+    std::fs::write(&bad, "small: {height_m: -0.3}\n").unwrap();
+    let output = run(&["--cone-geometry", bad.to_str().unwrap()]);
+    assert!(!output.status.success());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        stderr.contains("bad.yaml") && stderr.contains("small.height_m"),
+        "{stderr}"
+    );
+}
+
 /// More given boxes than the live services' per-frame cap (128) are all processed; a box
 /// wholly outside the image is refused with its line number, and the command fails.
 #[test]
@@ -393,7 +452,13 @@ fn readme_quickstart_predicts_the_sample_frame() {
         if cone["position_camera_m"].is_array() {
             let ranging = cone["ranging"].as_str().unwrap_or("");
             assert!(
-                ["keypoints", "keypoints+box", "box"].contains(&ranging),
+                [
+                    "keypoints",
+                    "keypoints+box",
+                    "box",
+                    "keypoints (box refused)"
+                ]
+                .contains(&ranging),
                 "ranging {ranging:?}"
             );
         }
@@ -409,6 +474,57 @@ fn readme_quickstart_predicts_the_sample_frame() {
             "the cone at {t:.2?} has no estimate within 10 % of its range ({relative:.3})"
         );
     }
+}
+
+/// `conesight run --cone-geometry` reaches the localiser service: rendered cones declared 10 %
+/// larger than they are come out about 10 % too far (the summary's median error as a share of
+/// the range), and a bad file stops the run before it starts, naming the field.
+#[test]
+fn run_with_a_larger_cone_geometry_puts_cones_ten_percent_too_far() {
+    let dir = TempDir::new("run-geometry");
+    let larger = dir.0.join("cones.yaml");
+    std::fs::write(&larger, "small: {scale: 1.1}\nlarge: {scale: 1.1}\n").unwrap();
+    let out = dir.0.join("out");
+    let run = |extra: &[&str]| {
+        let mut args = vec![
+            "run",
+            "--frames",
+            "6",
+            "--preload",
+            "3",
+            "--rate-hz",
+            "4",
+            "--boxes",
+            "truth",
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        conesight(&args)
+    };
+    let median_percent = |output: &Output| -> f64 {
+        let stdout = String::from_utf8_lossy(&output.stdout);
+        let line = stdout
+            .lines()
+            .find(|l| l.contains("% of range"))
+            .unwrap_or_else(|| panic!("no error line in:\n{stdout}"));
+        let before = line.split(" % of range").next().unwrap();
+        before.rsplit('(').next().unwrap().trim().parse().unwrap()
+    };
+    let shipped = run(&[]);
+    assert!(shipped.status.success());
+    let scaled = run(&["--cone-geometry", larger.to_str().unwrap()]);
+    assert!(scaled.status.success());
+    let (a, b) = (median_percent(&shipped), median_percent(&scaled));
+    eprintln!("median error: shipped {a} %, 10 % larger cones {b} %");
+    assert!(a < 3.0, "shipped geometry: {a} %");
+    assert!((7.0..=13.0).contains(&b), "10 % larger geometry: {b} %");
+    let bad = dir.0.join("bad.yaml");
+    std::fs::write(&bad, "large: {keypoint_heights_m: {apex: 9.0}}\n").unwrap();
+    let output = run(&["--cone-geometry", bad.to_str().unwrap()]);
+    assert!(!output.status.success());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(stderr.contains("large.keypoint_heights_m"), "{stderr}");
 }
 
 /// `conesight run` keeps its table and its log apart: stdout carries the table and summary

@@ -14,6 +14,8 @@
 //! - [`perturb`] draws the seeded box-edge perturbations.
 //! - [`detection`] runs the detector down to a low score floor for AP, and at its operating
 //!   threshold for the pipeline.
+//! - [`box_cases`] ranges the cones whose box lies (cut, occluded, tilted, misclassed) by each
+//!   cue and as the localiser does.
 //! - [`real`] ranges labelled real frames by each cue (keypoints, box, fused): the real
 //!   consistency check.
 //! - [`records`] defines the JSONL records (the contract with the Python report).
@@ -23,6 +25,7 @@
 //! Entry point: `conesight_eval::run::run(&EvalConfig::default())`.
 
 pub mod bands;
+pub mod box_cases;
 pub mod cli;
 pub mod config;
 pub mod detection;

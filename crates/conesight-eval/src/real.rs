@@ -28,7 +28,7 @@ use conesight_core::{
 };
 use conesight_onnx::ModelOptions;
 use conesight_pipeline::boxes::YoloClasses;
-use conesight_pipeline::keypoint_stage::REFERENCE_SIGMA_PX;
+use conesight_pipeline::keypoint_stage::{DEFAULT_MAX_CONES_PER_FRAME, REFERENCE_SIGMA_PX};
 use conesight_pipeline::localiser_stage::cone_box_of;
 use conesight_pipeline::source::read_image;
 use conesight_pipeline::{InProcessPipeline, PipelineConfig};
@@ -307,7 +307,10 @@ fn keypoints_of(
     if boxes.is_empty() {
         return Ok(Vec::new());
     }
-    pipeline.keypoint_stage().set_max_cones(boxes.len());
+    // Every box is processed (the per-frame cap guards the live services only).
+    pipeline
+        .keypoint_stage()
+        .set_max_cones(boxes.len().max(DEFAULT_MAX_CONES_PER_FRAME));
     let result = pipeline.process(image, Some(boxes))?;
     let rejected: Vec<usize> = result.rejected.iter().map(|(i, _)| *i).collect();
     let mut next = result.keypoints.into_iter();

@@ -11,6 +11,7 @@
 //! | `detections.jsonl` | frame (with a detector) | [`DetectionFrameRecord`] |
 //! | `pipeline.jsonl` | frame (with a detector): detector -> keypoints -> PnP | [`PipelineFrameRecord`] |
 //! | `timing.jsonl` | frame: production keypoints + PnP on the exact boxes | [`TimingRecord`] |
+//! | `box_cases.jsonl` | held-out cone with its visible box, by case (cut, occluded, tilted, misclassed, clean) | [`crate::box_cases::BoxCaseRecord`] |
 //! | `real_cones.jsonl` | labelled real cone (and detector box matched to it): range per cue | [`crate::real::RealConeRecord`] |
 //! | `meta.json` | the run | [`Meta`] |
 

@@ -1,6 +1,8 @@
 //! The evaluation loop ([`run`]): for every held-out frame, render it in memory, then
 //! 1. give the keypoint networks the exact boxes of the usable cones in range and solve every
 //!    PnP variant on their keypoints (`gt_cones.jsonl`);
+//!    Then every cone with its visible box, beside the frame's others, by case: cut,
+//!    occluded, tilted, a large cone classed as small, clean (`box_cases.jsonl`);
 //! 2. perturb those boxes and solve again with the production network (`perturbation.jsonl`);
 //! 3. with a trained detector: detections for AP (`detections.jsonl`) and the whole pipeline
 //!    judged against the truth, with per-stage timings (`pipeline.jsonl`).
@@ -264,6 +266,7 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Meta> {
     let mut detections_out = out("detections.jsonl")?;
     let mut pipeline_out = out("pipeline.jsonl")?;
     let mut timing_out = out("timing.jsonl")?;
+    let mut box_cases_out = out("box_cases.jsonl")?;
 
     let frames = config.frames();
     let progress = bar(frames.len() as u64, "frames");
@@ -359,6 +362,41 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Meta> {
             }
         }
         gt_cones += judged.len();
+
+        // 1b. Boxes that lie: cut, tilted and misclassed cones in the frame as rendered, and
+        // occluded ones in a copy with cones added in front of a few.
+        {
+            let (_, primary) = &mut pipelines[0];
+            for record in crate::box_cases::frame_cases(
+                primary,
+                &variants,
+                image,
+                &labels,
+                config.range_m,
+                (seed, index),
+            )? {
+                if !record.case.starts_with("occluded") {
+                    box_cases_out.write(&record)?;
+                }
+            }
+            let occluded_scene = crate::box_cases::with_occluders(&scene);
+            let occluded = renderer.render(&occluded_scene).with_context(|| {
+                format!("rendering frame {index} of seed {seed} with occluders")
+            })?;
+            let occluded_labels = label_frame(&renderer, &occluded_scene, &occluded);
+            for record in crate::box_cases::frame_cases(
+                primary,
+                &variants,
+                &occluded.image,
+                &occluded_labels,
+                config.range_m,
+                (seed, index),
+            )? {
+                if record.case.starts_with("occluded") {
+                    box_cases_out.write(&record)?;
+                }
+            }
+        }
 
         // 2. Perturbed boxes, production network, cone solver.
         if config.perturbation_draws > 0 {
@@ -479,6 +517,7 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Meta> {
         detections_out,
         pipeline_out,
         timing_out,
+        box_cases_out,
     ] {
         writer.finish()?;
     }

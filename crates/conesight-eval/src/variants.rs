@@ -84,6 +84,11 @@ impl Variants {
         })
     }
 
+    /// The camera.
+    pub fn camera(&self) -> &Camera {
+        &self.camera
+    }
+
     /// Every variant on `observation` of a cone of `class` in `cone_box`, with its time.
     pub fn solve_all(
         &self,

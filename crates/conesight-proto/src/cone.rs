@@ -147,6 +147,7 @@ impl From<&LocatedCone> for pb::Cone {
                 Ranging::Keypoints => pb::Ranging::Keypoints,
                 Ranging::KeypointsAndBox => pb::Ranging::KeypointsAndBox,
                 Ranging::Box => pb::Ranging::Box,
+                Ranging::KeypointsBoxRefused => pb::Ranging::KeypointsBoxRefused,
             }
             .into(),
         }
@@ -190,6 +191,7 @@ impl TryFrom<&pb::Cone> for LocatedCone {
             Ok(pb::Ranging::Unspecified | pb::Ranging::Keypoints) => Ranging::Keypoints,
             Ok(pb::Ranging::KeypointsAndBox) => Ranging::KeypointsAndBox,
             Ok(pb::Ranging::Box) => Ranging::Box,
+            Ok(pb::Ranging::KeypointsBoxRefused) => Ranging::KeypointsBoxRefused,
             Err(_) => {
                 return Err(ProtoError::UnknownEnum {
                     field: "ranging".into(),

@@ -471,6 +471,16 @@ def main(argv: list[str] | None = None) -> int:
     if not real_det["available"]:
         missing.append(f"detector on real frames: {real_det['reason']}")
 
+    # 3b. Ranges on real frames.
+    from conesight_train.report import real_ranging as real_ranging_module
+
+    real_ranging = json_safe(real_ranging_module.real_ranging(args.records))
+    if real_ranging["available"]:
+        real_ranging_module.plot(real_ranging, out_png / "real_ranging.png")
+        real_ranging["png"] = "results/real_ranging.png"
+    else:
+        missing.append(f"ranges on real frames: {real_ranging['reason']}")
+
     results: dict[str, Any] = {
         "run": {
             "command": args.command,
@@ -500,6 +510,7 @@ def main(argv: list[str] | None = None) -> int:
         "real_detection": real_det,
         "keypoints": keypoints,
         "accuracy_3d": accuracy,
+        "real_ranging": real_ranging,
         "perturbation": metrics.perturbation_summary(records.perturbation),
         "pnp_variants": {
             "opencv_version": opencv_version(),

@@ -11,9 +11,9 @@
 //! small:
 //!   height_m: 0.325              # ground to the top of the body: the top of the cone's box
 //!   plate_half_width_m: 0.114    # half the side of the square base plate
-//!   plate_height_m: 0.032        # the base plate's thickness: the body starts there
-//!   keypoint_heights_m: {base: 0.032, lower_stripe: 0.130, upper_stripe: 0.220, apex: 0.320}
-//!   body_radius_m: {base: 0.0797, apex: 0.0184}   # at the base and apex keypoint heights
+//!   plate_height_m: 0.033        # the base plate's thickness: the body starts there
+//!   keypoint_heights_m: {base: 0.033, lower_stripe: 0.132, upper_stripe: 0.222, apex: 0.323}
+//!   body_radius_m: {base: 0.0801, apex: 0.0187}   # at the base and apex keypoint heights
 //! large:
 //!   scale: 1.1                   # the shipped large cone, 10 % larger in every dimension
 //! ```

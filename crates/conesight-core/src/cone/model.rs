@@ -36,9 +36,9 @@ pub struct ConeModel {
 /// boxes), the keypoints of every fully visible small cone at least 40 px tall, put in metres
 /// by its box (the box spans the full 325 mm, from the base plate's front edge on the ground to
 /// the top; the plate's depth is accounted for with a camera 1 m above the road). Medians
-/// over 2,115 cones: base keypoints 32 mm above the ground (where the body meets the base plate,
-/// as labellers click it), stripe edges 130 and 220 mm, apex 320 mm; body radius 79.7 mm at
-/// the base keypoints, tapering straight (0.213 m per m) to 18.4 mm at the apex height. The
+/// over 1,770 cones: base keypoints 33 mm above the ground (where the body meets the base plate,
+/// as labellers click it), stripe edges 132 and 222 mm, apex 323 mm; body radius 80.1 mm at
+/// the base keypoints, tapering straight (0.2115 m per m) to 18.7 mm at the apex height. The
 /// paper's model (base on the ground, apex at 325 mm, radii fitted to the 48x64 crops, which
 /// are squeezed sideways) made a real cone's keypoints look 12 % smaller than they are, and
 /// put it that much too far.
@@ -46,18 +46,18 @@ const SMALL: ConeModel = ConeModel::tapered(
     0.114,
     SMALL_PLATE_HEIGHT_M,
     0.325,
-    [SMALL_PLATE_HEIGHT_M, 0.130, 0.220, 0.320],
+    [SMALL_PLATE_HEIGHT_M, 0.132, 0.222, 0.323],
     SMALL_BASE_RADIUS_M,
     SMALL_APEX_RADIUS_M,
-    &[(0.130, 0.220)],
+    &[(0.132, 0.222)],
 );
 
 /// Height of the small cone's base plate, where the body and the base keypoints start (fitted).
-const SMALL_PLATE_HEIGHT_M: f64 = 0.032;
+const SMALL_PLATE_HEIGHT_M: f64 = 0.033;
 /// Body radius of the small cone at the base keypoint (fitted, see above).
-const SMALL_BASE_RADIUS_M: f64 = 0.0797;
+const SMALL_BASE_RADIUS_M: f64 = 0.0801;
 /// Body radius of the small cone at the apex keypoint's height (fitted, see above).
-const SMALL_APEX_RADIUS_M: f64 = 0.0184;
+const SMALL_APEX_RADIUS_M: f64 = 0.0187;
 
 /// Height scale of the large cone relative to the small one (505 / 325).
 const LARGE_HEIGHT_SCALE: f64 = 0.505 / 0.325;
@@ -78,15 +78,15 @@ const LARGE: ConeModel = ConeModel::tapered(
     0.505,
     [
         SMALL_PLATE_HEIGHT_M * LARGE_HEIGHT_SCALE,
-        0.130 * LARGE_HEIGHT_SCALE,
-        0.220 * LARGE_HEIGHT_SCALE,
-        0.320 * LARGE_HEIGHT_SCALE,
+        0.132 * LARGE_HEIGHT_SCALE,
+        0.222 * LARGE_HEIGHT_SCALE,
+        0.323 * LARGE_HEIGHT_SCALE,
     ],
     SMALL_BASE_RADIUS_M * LARGE_WIDTH_SCALE,
     SMALL_APEX_RADIUS_M * LARGE_WIDTH_SCALE,
     &[
-        (0.130 * LARGE_HEIGHT_SCALE, 0.160 * LARGE_HEIGHT_SCALE),
-        (0.190 * LARGE_HEIGHT_SCALE, 0.220 * LARGE_HEIGHT_SCALE),
+        (0.132 * LARGE_HEIGHT_SCALE, 0.162 * LARGE_HEIGHT_SCALE),
+        (0.192 * LARGE_HEIGHT_SCALE, 0.222 * LARGE_HEIGHT_SCALE),
     ],
 );
 

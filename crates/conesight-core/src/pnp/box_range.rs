@@ -38,6 +38,10 @@ pub const BOX_RANGE_RELATIVE_SIGMA: f64 = 0.04;
 /// Standard deviation of the plate's nearest-edge distance over a uniformly random yaw, in half
 /// widths: `sqrt(1 + 2/pi - 16/pi^2)`. The box's range inherits it times `c / H`.
 pub const PLATE_NEAREST_EDGE_SPREAD: f64 = 0.1245;
+/// The box is not fused when its depth and the keypoints' differ by more than this many
+/// standard deviations of their difference: a tilted cone, one hidden in part by another, or
+/// a large cone classed as small has a box that lies, and the keypoints carry it.
+pub const BOX_GATE_SIGMAS: f64 = 3.0;
 /// A box edge within this many pixels of the image's top or bottom edge is taken as cut there.
 pub const EDGE_MARGIN_PX: f64 = 1.0;
 /// Mean distance of a square plate's nearest edge from its centre, in half widths, over a
@@ -54,6 +58,9 @@ pub enum Ranging {
     KeypointsAndBox,
     /// The box alone (the keypoints gave no pose): larger covariance.
     Box,
+    /// Keypoints and PnP alone: the box lies (it disagreed with the keypoints beyond
+    /// [`BOX_GATE_SIGMAS`], or a nearer cone's box overlaps it), so it was not used.
+    KeypointsBoxRefused,
 }
 
 impl Ranging {
@@ -63,6 +70,7 @@ impl Ranging {
             Self::Keypoints => "keypoints",
             Self::KeypointsAndBox => "keypoints+box",
             Self::Box => "box",
+            Self::KeypointsBoxRefused => "keypoints (box refused)",
         }
     }
 }
@@ -290,9 +298,79 @@ pub fn fuse_box_depth(estimate: &ConeEstimate, depth: &BoxDepth) -> ConeEstimate
     fused
 }
 
+/// The box a cone at `estimate` would have: the bounding box of its plate's corner circle on the
+/// road and its top, projected. `None` when part of it is behind the camera.
+pub fn projected_box(
+    camera: &Camera,
+    model: &ConeModel,
+    estimate: &ConeEstimate,
+) -> Option<ConeBox> {
+    let up = estimate.axis_in_camera.normalize();
+    let reference = if up.x.abs() < 0.9 {
+        Vector3::x()
+    } else {
+        Vector3::z()
+    };
+    let a = (reference - up * up.dot(&reference)).normalize();
+    let b = up.cross(&a);
+    let base = estimate.position_in_camera;
+    let corner = model.plate_half_width_m * std::f64::consts::SQRT_2;
+    let mut lo = Point2::new(f64::INFINITY, f64::INFINITY);
+    let mut hi = Point2::new(f64::NEG_INFINITY, f64::NEG_INFINITY);
+    for (height, radius) in [(0.0, corner), (model.body_height_m, model.top_radius_m())] {
+        for i in 0..16 {
+            let t = std::f64::consts::TAU * f64::from(i) / 16.0;
+            let p = base + up * height + (a * t.cos() + b * t.sin()) * radius;
+            let pixel = camera.project(&p).ok()?;
+            lo = Point2::new(lo.x.min(pixel.x), lo.y.min(pixel.y));
+            hi = Point2::new(hi.x.max(pixel.x), hi.y.max(pixel.y));
+        }
+    }
+    Some(ConeBox {
+        x_min_px: lo.x,
+        y_min_px: lo.y,
+        x_max_px: hi.x,
+        y_max_px: hi.y,
+    })
+}
+
+/// Share of the visible box's size by which it may stick out of the box the estimate projects.
+pub const COVER_MARGIN: f64 = 0.25;
+
+/// True when the cone `estimate` places would show the `visible` box: the visible part of a
+/// cone lies within its whole projection (with [`COVER_MARGIN`] of slack and 2 px). A keypoint
+/// estimate that fails this put the cone where it cannot be (a sliver of a cone at the image's
+/// edge, keypoints on something else).
+pub fn covers_box(
+    camera: &Camera,
+    model: &ConeModel,
+    estimate: &ConeEstimate,
+    visible: &ConeBox,
+) -> bool {
+    let Some(whole) = projected_box(camera, model, estimate) else {
+        return false;
+    };
+    let slack_x = COVER_MARGIN * (visible.x_max_px - visible.x_min_px) + 2.0;
+    let slack_y = COVER_MARGIN * (visible.y_max_px - visible.y_min_px) + 2.0;
+    visible.x_min_px >= whole.x_min_px - slack_x
+        && visible.x_max_px <= whole.x_max_px + slack_x
+        && visible.y_min_px >= whole.y_min_px - slack_y
+        && visible.y_max_px <= whole.y_max_px + slack_y
+}
+
+/// How far the localiser may trust a cone's box.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BoxTrust {
+    /// Fused with the keypoints unless it disagrees beyond [`BOX_GATE_SIGMAS`].
+    Fuse,
+    /// Another cone in front overlaps it: used only when the keypoints give no pose.
+    Occluded,
+}
+
 /// One cone as the localiser ranges it: keypoint PnP (its covariance widened by the keypoints'
-/// common-mode error, [`super::add_common_mode`]) with the box-height depth fused in when
-/// `cone_box` gives one; the box alone when the keypoints give no pose. `model` is the cone
+/// common-mode and scale errors, [`super::add_common_mode`], [`super::add_scale_error`]) with
+/// the box-height depth fused in when `cone_box` gives one and agrees within
+/// [`BOX_GATE_SIGMAS`]; the box alone when the keypoints give no pose. `model` is the cone
 /// model `solver` was made for; `reference_sigma_px` turns the observation's weights back into
 /// keypoint sigmas. The error is the solver's when neither cue places the cone.
 pub fn locate_cone(
@@ -302,6 +380,25 @@ pub fn locate_cone(
     cone_box: Option<&ConeBox>,
     reference_sigma_px: f64,
 ) -> Result<(ConeEstimate, Ranging), GeometryError> {
+    locate_cone_with(
+        solver,
+        model,
+        observation,
+        cone_box.map(|b| (b, BoxTrust::Fuse)),
+        reference_sigma_px,
+    )
+}
+
+/// [`locate_cone`] with how far to trust the box.
+pub fn locate_cone_with(
+    solver: &ConeSolver,
+    model: &ConeModel,
+    observation: &ConeObservation,
+    cone_box: Option<(&ConeBox, BoxTrust)>,
+    reference_sigma_px: f64,
+) -> Result<(ConeEstimate, Ranging), GeometryError> {
+    let trust = cone_box.map(|(_, trust)| trust);
+    let cone_box = cone_box.map(|(b, _)| b);
     let params = &solver.params;
     let depth = cone_box.and_then(|b| {
         box_depth(
@@ -319,14 +416,47 @@ pub fn locate_cone(
     });
     match (solved, depth) {
         (Ok(estimate), Some(depth)) => {
-            Ok((fuse_box_depth(&estimate, &depth), Ranging::KeypointsAndBox))
+            let innovation = depth.depth_m - estimate.position_in_camera.z;
+            let sigma = (estimate.covariance_m2[(2, 2)] + depth.sigma_m.powi(2)).sqrt();
+            if trust == Some(BoxTrust::Occluded) || innovation.abs() > BOX_GATE_SIGMAS * sigma {
+                keypoints_alone(
+                    solver,
+                    model,
+                    estimate,
+                    cone_box,
+                    Ranging::KeypointsBoxRefused,
+                )
+            } else {
+                Ok((fuse_box_depth(&estimate, &depth), Ranging::KeypointsAndBox))
+            }
         }
-        (Ok(estimate), None) => Ok((estimate, Ranging::Keypoints)),
+        (Ok(estimate), None) => {
+            keypoints_alone(solver, model, estimate, cone_box, Ranging::Keypoints)
+        }
         (Err(_), Some(depth)) => Ok((
             box_estimate(&depth, &solver.params.up_in_camera),
             Ranging::Box,
         )),
         (Err(error), None) => Err(error),
+    }
+}
+
+/// A keypoint-only estimate, refused when it does not cover the cone's own visible box.
+fn keypoints_alone(
+    solver: &ConeSolver,
+    model: &ConeModel,
+    estimate: ConeEstimate,
+    cone_box: Option<&ConeBox>,
+    ranging: Ranging,
+) -> Result<(ConeEstimate, Ranging), GeometryError> {
+    match cone_box {
+        Some(visible) if !covers_box(&solver.camera, model, &estimate, visible) => {
+            Err(GeometryError::SolverFailed {
+                reason: "the keypoints place the cone where it would not show its box (a sliver \
+                         of a cone at the image's edge, or keypoints on something else)",
+            })
+        }
+        _ => Ok((estimate, ranging)),
     }
 }
 
@@ -472,5 +602,67 @@ mod tests {
         let fused = fuse_box_depth(&pnp, &depth);
         assert!((fused.position_in_camera.z - 22.0).abs() < 0.01);
         assert!(fused.covariance_m2[(2, 2)] <= 1e-4);
+    }
+
+    /// Exact keypoints of a small cone `depth` ahead and `lateral` aside of a level camera 1 m
+    /// high, and the solver for it.
+    fn exact_cone(depth: f64, lateral: f64) -> (ConeSolver, ConeObservation) {
+        use crate::cone::silhouette_keypoints;
+        use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+        let model = ConeModel::small();
+        let camera_from_cone = Isometry3::from_parts(
+            Translation3::new(lateral, 1.0, depth),
+            UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::FRAC_PI_2),
+        );
+        let keypoints = silhouette_keypoints(&camera(), &model, &camera_from_cone).unwrap();
+        let params = crate::pnp::ConePnpParams::default();
+        let solver = ConeSolver::new(&camera(), &model, &params).unwrap();
+        (solver, ConeObservation::new(keypoints))
+    }
+
+    #[test]
+    fn a_box_that_disagrees_is_refused_and_the_keypoints_carry_the_cone() {
+        let model = ConeModel::small();
+        let (solver, observation) = exact_cone(10.0, 0.5);
+        let honest = cone_box(10.0, 0.5, 1.0);
+        let (fused, ranging) =
+            locate_cone(&solver, &model, &observation, Some(&honest), 1.0).unwrap();
+        assert_eq!(ranging, Ranging::KeypointsAndBox);
+        assert_relative_eq!(fused.position_in_camera.z, 10.0, max_relative = 0.01);
+        // The bottom third hidden behind a nearer cone: the box says 15 m.
+        let mut short = honest;
+        short.y_max_px -= (short.y_max_px - short.y_min_px) / 3.0;
+        let (alone, ranging) =
+            locate_cone(&solver, &model, &observation, Some(&short), 1.0).unwrap();
+        assert_eq!(ranging, Ranging::KeypointsBoxRefused);
+        assert_relative_eq!(alone.position_in_camera.z, 10.0, max_relative = 0.01);
+        // Marked occluded, even an honest box is only a fallback.
+        let (_, ranging) = locate_cone_with(
+            &solver,
+            &model,
+            &observation,
+            Some((&honest, BoxTrust::Occluded)),
+            1.0,
+        )
+        .unwrap();
+        assert_eq!(ranging, Ranging::KeypointsBoxRefused);
+    }
+
+    #[test]
+    fn keypoints_that_do_not_cover_their_own_box_give_no_range() {
+        let model = ConeModel::small();
+        // Keypoints of a cone at 30 m inside the box of a cone at 8 m (a sliver at the edge).
+        let (solver, observation) = exact_cone(30.0, 0.0);
+        let near = cone_box(8.0, 0.0, 1.0);
+        let error = locate_cone(&solver, &model, &observation, Some(&near), 1.0).unwrap_err();
+        assert!(
+            error.to_string().contains("would not show its box"),
+            "{error}"
+        );
+        // The same keypoints with their own box are fine.
+        let own = cone_box(30.0, 0.0, 1.0);
+        let estimate = solver.solve(&observation).unwrap();
+        assert!(covers_box(&camera(), &model, &estimate, &own));
+        assert!(!covers_box(&camera(), &model, &estimate, &near));
     }
 }
