@@ -217,19 +217,6 @@ async fn run_async(args: RunArgs) -> anyhow::Result<()> {
     } else if has(ServiceName::Detector) {
         println!("boxes: detector {}", detector_path.display());
     }
-    // Zenoh's receive limit follows the services' message limit.
-    let session =
-        open_session(&CommonArgs::for_camera(args.zenoh.clone(), &args.camera).zenoh_with_limits())
-            .await?;
-    let topics = Topics::from_args(&args.zenoh)?;
-    if let Some(addr) = args.dashboard {
-        let bound = crate::dashboard::serve(&session, &topics, addr, &shutdown).await?;
-        println!("dashboard: http://{bound}/");
-    }
-    if let Some(addr) = args.foxglove {
-        let bound = crate::foxglove_view::serve(&session, &topics, addr, &shutdown).await?;
-        println!("foxglove: ws://{bound}");
-    }
     let common = |name: ServiceName| {
         let mut common = CommonArgs::for_camera(args.zenoh.clone(), &args.camera);
         common.execution_provider = args.execution_provider;
@@ -250,10 +237,32 @@ async fn run_async(args: RunArgs) -> anyhow::Result<()> {
     camera_args.camera_info = args.camera_info.clone();
     camera_args.extrinsics = args.extrinsics.clone();
     camera_args.source_loop = args.source_loop;
-
+    // Someone is watching: a calibration of another size stops the run, whatever the source.
+    camera_args.stop_on_size_mismatch = true;
+    // Opened (an image folder's first image checked against the calibration, a synthetic
+    // sequence rendered) before any model loads, so a wrong file fails at once.
+    let source = if has(ServiceName::Camera) {
+        Some(load_source(&camera_args, true).await?)
+    } else {
+        None
+    };
+    let preloaded: Option<Arc<Vec<CameraFrame>>> =
+        source.as_ref().and_then(|source| source.known_frames());
+    // Zenoh's receive limit follows the services' message limit.
+    let session =
+        open_session(&CommonArgs::for_camera(args.zenoh.clone(), &args.camera).zenoh_with_limits())
+            .await?;
+    let topics = Topics::from_args(&args.zenoh)?;
+    if let Some(addr) = args.dashboard {
+        let bound = crate::dashboard::serve(&session, &topics, addr, &shutdown).await?;
+        println!("dashboard: http://{bound}/");
+    }
+    if let Some(addr) = args.foxglove {
+        let bound = crate::foxglove_view::serve(&session, &topics, addr, &shutdown).await?;
+        println!("foxglove: ws://{bound}");
+    }
     let mut tasks: Vec<(ServiceName, Task)> = Vec::new();
-    let camera_done = Arc::new(AtomicBool::new(false));
-    let mut preloaded: Option<Arc<Vec<CameraFrame>>> = None;
+    let camera = Arc::new(CameraState::default());
     // Subscribe before any service publishes, so the monitor sees frame 0.
     let monitor = Monitor::subscribe(&session, &topics, &args.camera).await?;
     let start_node = |name: ServiceName, label: &'static str, age| {
@@ -314,9 +323,7 @@ async fn run_async(args: RunArgs) -> anyhow::Result<()> {
         };
         tasks.push((name, task));
     }
-    if has(ServiceName::Camera) {
-        let source = load_source(&camera_args, true).await?;
-        preloaded = source.known_frames();
+    if let Some(source) = source {
         let (name, node) = start_node(ServiceName::Camera, "camera", None);
         presences.push(node.announce().await?);
         if args.http_base_port.is_some() {
@@ -328,13 +335,14 @@ async fn run_async(args: RunArgs) -> anyhow::Result<()> {
         // Frames published before the other services listen would be lost: wait for them.
         wait_until_loaded(&tasks, &readiness, Duration::from_secs(20)).await;
         let shutdown = shutdown.clone();
-        let done = camera_done.clone();
+        let state = camera.clone();
         tasks.push((
             name,
             tokio::spawn(async move {
                 let result =
                     conesight_camera_service::run(&camera_args, source, node, shutdown).await;
-                done.store(true, Ordering::Relaxed);
+                state.failed.store(result.is_err(), Ordering::Relaxed);
+                state.done.store(true, Ordering::Relaxed);
                 result
             }),
         ));
@@ -343,24 +351,50 @@ async fn run_async(args: RunArgs) -> anyhow::Result<()> {
         .run(
             &args,
             preloaded.as_deref(),
-            &camera_done,
+            &camera,
             has(ServiceName::Camera),
             &shutdown,
         )
         .await;
     shutdown.trigger();
+    let mut failures = Vec::new();
     for (name, task) in tasks {
+        let label = format!("{name:?}").to_lowercase();
         match task.await {
             Ok(Ok(())) => {}
-            Ok(Err(error)) => eprintln!("{name:?} service failed: {error:#}"),
-            Err(error) => eprintln!("{name:?} service task failed: {error}"),
+            Ok(Err(error)) => failures.push(error.context(format!("the {label} service stopped"))),
+            Err(error) => {
+                failures.push(anyhow::anyhow!("the {label} service task failed: {error}"))
+            }
         }
     }
     drop(presences);
     if let Err(error) = session.close().await {
         tracing::warn!(%error, "closing the Zenoh session");
     }
-    summary.finish(&args, preloaded.as_deref())
+    // A run that failed before any cones came has no summary to give, only the error.
+    if !(summary.outcomes.is_empty() && !failures.is_empty()) {
+        summary.finish(&args, preloaded.as_deref())?;
+    }
+    let mut failures = failures.into_iter();
+    match failures.next() {
+        None => Ok(()),
+        Some(first) => {
+            for other in failures {
+                eprintln!("also: {other:#}");
+            }
+            Err(first)
+        }
+    }
+}
+
+/// How the camera service of the run ended.
+#[derive(Debug, Default)]
+struct CameraState {
+    /// Its loop returned (frames out, source finished, or an error).
+    done: AtomicBool,
+    /// It returned an error (a frame of another size than the calibration's, ...).
+    failed: AtomicBool,
 }
 
 /// Waits until every started service has loaded its model and declared its subscribers (its
@@ -438,7 +472,7 @@ impl Monitor {
         self,
         args: &RunArgs,
         frames: Option<&Vec<CameraFrame>>,
-        camera_done: &AtomicBool,
+        camera: &CameraState,
         has_camera: bool,
         shutdown: &Shutdown,
     ) -> Summary {
@@ -463,12 +497,13 @@ impl Monitor {
             "p99_ms"
         );
         loop {
-            // The frames asked for are in, or the camera is done (its frames, or a video's
-            // end) and the pipeline has drained.
+            // The frames asked for are in, the camera failed, or it is done (its frames, or
+            // the end of a folder or video) and the pipeline has drained.
             let finished = (args.frames > 0
                 && (summary.outcomes.contains_key(&(args.frames - 1))
                     || (!has_camera && summary.outcomes.len() as u64 >= args.frames)))
-                || (camera_done.load(Ordering::Relaxed) && last_output.elapsed() > DRAIN_TIMEOUT);
+                || camera.failed.load(Ordering::Relaxed)
+                || (camera.done.load(Ordering::Relaxed) && last_output.elapsed() > DRAIN_TIMEOUT);
             if finished {
                 break;
             }

@@ -67,7 +67,9 @@ fn read_folder_frame(
 impl FolderFrames {
     /// The images of `dir` (at least one file with an image extension), decoded later; the
     /// label files of `labels` give each image's boxes; decoded frames are kept within
-    /// `cache_mb` MiB.
+    /// `cache_mb` MiB. The first image's size (its header alone is read) must be the
+    /// calibration's, so a calibration of another camera or mode is refused before anything
+    /// starts.
     pub fn new(
         dir: &Path,
         calibration: Calibration,
@@ -75,6 +77,22 @@ impl FolderFrames {
         cache_mb: usize,
     ) -> Result<Self, SourceError> {
         let paths = list_images(dir)?;
+        let camera = &calibration.camera;
+        // An unreadable first image is skipped when it is due, as any other.
+        if let Some((path, Ok((width_px, height_px)))) = paths
+            .first()
+            .map(|path| (path, image::image_dimensions(path)))
+            && (width_px, height_px) != (camera.width_px, camera.height_px)
+        {
+            return Err(SourceError::SizeMismatch {
+                source_name: format!("folder:{}", dir.display()),
+                frame: path.display().to_string(),
+                width_px,
+                height_px,
+                expected_width_px: camera.width_px,
+                expected_height_px: camera.height_px,
+            });
+        }
         Ok(Self {
             dir: dir.to_path_buf(),
             cache: vec![None; paths.len()],
@@ -217,7 +235,7 @@ mod tests {
 
     fn open(dir: &Path, cache_mb: usize) -> FolderFrames {
         let calibration = Calibration {
-            camera: Camera::paper_default(),
+            camera: Camera::pinhole(8, 6, 10.0),
             extrinsics: Extrinsics::paper_default(),
         };
         FolderFrames::new(dir, calibration, None, cache_mb).unwrap()
@@ -259,6 +277,28 @@ mod tests {
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
+    /// A calibration of another size is refused when the folder is opened, naming the image,
+    /// both sizes and the fix (it used to be found frame by frame, and retried for ever).
+    #[test]
+    fn a_folder_of_another_size_than_the_calibration_is_refused_at_open() {
+        let dir = folder("size", 1);
+        let calibration = Calibration {
+            camera: Camera::pinhole(16, 12, 20.0),
+            extrinsics: Extrinsics::paper_default(),
+        };
+        let error = FolderFrames::new(&dir, calibration, None, 1)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            error.contains("0.png")
+                && error.contains("8x6 px")
+                && error.contains("16x12")
+                && error.contains("pass the calibration of the camera that took it"),
+            "{error}"
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
     #[test]
     fn empty_or_unreadable_folders_are_clear_errors() {
         let dir = folder("bad", 0);
@@ -267,7 +307,7 @@ mod tests {
         assert!(error.contains("no readable image"), "{error}");
         std::fs::remove_file(dir.join("0.png")).unwrap();
         let calibration = Calibration {
-            camera: Camera::paper_default(),
+            camera: Camera::pinhole(8, 6, 10.0),
             extrinsics: Extrinsics::paper_default(),
         };
         let error = FolderFrames::new(&dir, calibration, None, 1)

@@ -109,6 +109,14 @@ pub trait FrameSource: Send {
         false
     }
 
+    /// True for a live camera: a frame of another size than the calibration's may be a mode
+    /// it came up in, so the camera service reports it and starts the source again. For
+    /// files (an image folder, a video file, rendered frames) it is final: the camera stops
+    /// with the error.
+    fn is_live(&self) -> bool {
+        false
+    }
+
     /// Every frame the source will give, when known up front (a preloaded synthetic
     /// sequence): for consumers that judge the pipeline against the truth.
     fn known_frames(&self) -> Option<Arc<Vec<CameraFrame>>> {
@@ -123,8 +131,15 @@ pub fn check_size(source_name: &str, frame: &SourceFrame) -> Result<(), SourceEr
     if (width_px, height_px) == (camera.width_px, camera.height_px) {
         return Ok(());
     }
+    // An image file is named by its path; a camera's frame by its index.
+    let frame_name = if frame.name.starts_with(source_name) {
+        format!("frame {}", frame.index)
+    } else {
+        frame.name.clone()
+    };
     Err(SourceError::SizeMismatch {
         source_name: source_name.to_owned(),
+        frame: frame_name,
         width_px,
         height_px,
         expected_width_px: camera.width_px,

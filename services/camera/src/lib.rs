@@ -13,10 +13,12 @@
 //! - `gst:PIPELINE`: a GStreamer pipeline (a V4L2, GigE, USB3 or CSI camera, RTSP, ...).
 //!
 //! Every source but `synthetic` needs `--camera-info FILE`, and a frame whose size differs
-//! from it is an error naming both sizes. Synthetic and folder frames go out at `--rate-hz`
-//! or, with `--rate-hz 0`, as fast as the pipeline takes them (the next frame when the cones
-//! of the previous one arrive, or after `--pace-timeout-ms`); GStreamer sources at their own
-//! rate, stamped with the buffer's time (`capture`).
+//! from it is an error naming both sizes: the service stops with it for an image folder (its
+//! first image is checked before anything starts) or a video file; a live camera is reported
+//! and started again (it may have come up in another mode). Synthetic and folder frames go
+//! out at `--rate-hz` or, with `--rate-hz 0`, as fast as the pipeline takes them (the next
+//! frame when the cones of the previous one arrive, or after `--pace-timeout-ms`); GStreamer
+//! sources at their own rate, stamped with the buffer's time (`capture`).
 //!
 //! A source that fails, ends or stalls (no frame for `--source-timeout-ms`) is reported
 //! (`conesight_errors_total{kind="source_failed"|"source_ended"|"source_stalled"|...}`, one
@@ -129,6 +131,11 @@ pub struct CameraArgs {
     /// files), standing in for the detector service.
     #[arg(long = "publish-boxes")]
     pub publish_boxes: bool,
+    /// Stop with the error at a frame of another size than the calibration's, whatever the
+    /// source (`conesight run` sets it: someone is watching). Without it only a live camera's
+    /// mismatch is retried (it may have come up in another mode); files stop.
+    #[arg(skip)]
+    pub stop_on_size_mismatch: bool,
 }
 
 impl CameraArgs {
@@ -153,6 +160,7 @@ impl CameraArgs {
             pace_timeout_ms: 1000,
             frames: 0,
             publish_boxes: false,
+            stop_on_size_mismatch: false,
         }
     }
 
