@@ -105,7 +105,7 @@ step "6. the split on loopback: camera + localiser services, detector + keypoint
 mkdir -p "$WORK/drive"
 cp docs/sample/frame.jpg "$WORK/drive/000000.jpg"
 PORT=$((17000 + RANDOM % 2000))
-conesight-camera --source folder --images "$WORK/drive" --camera-info "$WORK/cam.yaml" \
+conesight-camera --source folder --images "$WORK/drive" --source-loop --camera-info "$WORK/cam.yaml" \
   --extrinsics "$WORK/mount.yaml" --frame-encoding jpeg --rate-hz 2 \
   --zenoh-listen "tcp/127.0.0.1:$PORT" --namespace onyourcar --http-addr 127.0.0.1:0 \
   > "$WORK/camera.log" 2>&1 &

@@ -65,7 +65,8 @@ pub struct RunArgs {
     /// Camera id (key chunk).
     #[arg(long, default_value = "front")]
     camera: String,
-    /// Stop after this many frames (0: run until Ctrl-C, or until a video file ends).
+    /// Stop after this many frames (0: run until Ctrl-C, or until a video file or an image
+    /// folder ends).
     #[arg(long, default_value_t = 100)]
     frames: u64,
     /// Camera rate of synthetic and folder sources, frames per second (0: as fast as the
@@ -84,7 +85,8 @@ pub struct RunArgs {
     /// Extrinsics YAML of that camera (`vehicle_from_camera`; default: 1 m high, level).
     #[arg(long)]
     extrinsics: Option<PathBuf>,
-    /// With `--source video:PATH`: play the file again at its end (else the run ends there).
+    /// With `--source video:PATH` or `folder:DIR`: start again at the end of the file or
+    /// folder (else the run ends there).
     #[arg(long = "source-loop")]
     source_loop: bool,
     /// Seed of the synthetic sequence.

@@ -132,3 +132,53 @@ fn run_stops_at_a_calibration_of_another_size_with_predicts_error() {
         "{stderr}"
     );
 }
+
+/// The number `N` of the summary line `summary: N frames with cones ...`.
+fn frames_with_cones(stdout: &str) -> u64 {
+    stdout
+        .lines()
+        .find_map(|l| l.strip_prefix("summary: "))
+        .and_then(|l| l.split_whitespace().next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no summary line in\n{stdout}"))
+}
+
+/// Finding 2 of issue 39: `run --source folder:DIR` looped the folder for ever. It now plays
+/// it once and ends by itself (`--frames 0`: no frame count to stop it), each image processed
+/// once (`--rate-hz 0`: the next frame when the cones of the last one are in); with
+/// `--source-loop` it goes round again.
+#[test]
+fn run_on_a_folder_ends_at_its_last_image_unless_looped() {
+    let dir = TempDir::new("run-folder-end");
+    let out = dir.join("out");
+    let calibration = dir.join("camera.yaml");
+    camera_yaml(&calibration, 64, 48);
+    let images = dir.join("images");
+    std::fs::create_dir_all(&images).unwrap();
+    for i in 0..3 {
+        grey_png(&images.join(format!("{i:03}.png")), 64, 48);
+    }
+    let source = format!("folder:{}", images.display());
+    let mut args = vec![
+        "run",
+        "--source",
+        &source,
+        "--camera-info",
+        calibration.to_str().unwrap(),
+        "--rate-hz",
+        "0",
+        "--onnx-threads",
+        "1",
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    let once = [args.clone(), vec!["--frames", "0"]].concat();
+    let (status, stdout, _) = run_within(&dir, "once", &once, Duration::from_secs(120));
+    assert!(status.success());
+    assert_eq!(frames_with_cones(&stdout), 3, "{stdout}");
+
+    args.extend(["--source-loop", "--frames", "7"]);
+    let (status, stdout, _) = run_within(&dir, "looped", &args, Duration::from_secs(120));
+    assert!(status.success());
+    assert_eq!(frames_with_cones(&stdout), 7, "{stdout}");
+}

@@ -9,8 +9,8 @@
 //!   gst:PIPELINE` grammar.
 //! - [`synthetic`]: [`SyntheticFrames`], the renderer driving a track (preloaded and looped,
 //!   or rendered live), with exact truth.
-//! - [`folder`]: [`FolderFrames`], image files in name order, looped, decoded when due and
-//!   cached within a budget.
+//! - [`folder`]: [`FolderFrames`], image files in name order, once or looped, decoded when
+//!   due and cached within a budget.
 //! - [`gst`]: [`GstSource`], a GStreamer pipeline ending in an appsink forced to RGB (V4L2,
 //!   GigE and USB3 cameras through their plugins, RTSP, a Jetson's CSI camera) or a video file
 //!   (`filesrc ! decodebin`); frames stamped with the buffer's time.
@@ -80,7 +80,8 @@ pub enum Next {
     Frame(Box<CameraFrame>),
     /// No frame within the timeout (ask again).
     Pending,
-    /// The source is over for good (a video file played to its end without `--source-loop`).
+    /// The source is over for good (a video file or an image folder at its end without
+    /// `--source-loop`).
     Finished,
 }
 
@@ -162,7 +163,8 @@ pub struct OpenParams {
     pub labels: Option<std::path::PathBuf>,
     /// Decoded folder images kept within this many MiB.
     pub cache_mb: usize,
-    /// A video file starts again at its end.
+    /// A video file or an image folder starts again at its end (else the source is finished
+    /// there).
     pub looped: bool,
 }
 
@@ -193,6 +195,7 @@ pub fn open(spec: &SourceSpec, params: &OpenParams) -> Result<Box<dyn FrameSourc
                 calibration()?,
                 params.labels.clone(),
                 params.cache_mb,
+                params.looped,
             )?)
         }
         SourceSpec::Video(path) => Box::new(GstSource::video(path, calibration()?, params.looped)?),
