@@ -142,7 +142,7 @@ fn timestamp(ns: u64) -> Timestamp {
 }
 
 fn colour(class: ConeClass, alpha: f64) -> Color {
-    let [r, g, b] = crate::bev::class_colour(class).0;
+    let [r, g, b] = crate::draw::class_colour(class).0;
     Color {
         r: f64::from(r) / 255.0,
         g: f64::from(g) / 255.0,

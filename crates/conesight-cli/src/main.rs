@@ -25,6 +25,7 @@ mod dashboard;
 mod demo;
 mod demo_frame;
 mod diff_cmd;
+mod draw;
 mod echo_cmd;
 mod foxglove_view;
 mod job_cmd;
@@ -33,6 +34,7 @@ mod predict;
 mod record_cmd;
 mod replay_cmd;
 mod run;
+mod run_monitor;
 mod status_cmd;
 
 use clap::{Parser, Subcommand};

@@ -1,7 +1,8 @@
-//! `conesight run` on a source without truth (an image folder, as a team's own footage is),
-//! run as the built binary with the shipped models: it stops at once with `predict`'s error
-//! when the calibration is of another size (it used to wait for ever), and it ends at the end
-//! of the folder unless `--source-loop` is given.
+//! `conesight run` and `predict` on frames without truth (an image folder, as a team's own
+//! footage is; the real AMZ frames of `../shared` when present), run as the built binary with
+//! the shipped models: run stops at once with `predict`'s error when the calibration is of
+//! another size (it used to wait for ever), it ends at the end of the folder unless
+//! `--source-loop` is given, and both draw what they found (`predict --save`, `run --out`).
 #![allow(clippy::unwrap_used, clippy::expect_used, missing_docs)]
 
 mod common_process;
@@ -169,6 +170,8 @@ fn run_on_a_folder_ends_at_its_last_image_unless_looped() {
         "0",
         "--onnx-threads",
         "1",
+        "--save-every",
+        "0",
         "--out",
         out.to_str().unwrap(),
     ];
@@ -181,4 +184,189 @@ fn run_on_a_folder_ends_at_its_last_image_unless_looped() {
     let (status, stdout, _) = run_within(&dir, "looped", &args, Duration::from_secs(120));
     assert!(status.success());
     assert_eq!(frames_with_cones(&stdout), 7, "{stdout}");
+}
+
+/// The frames the pictures are tested on: 3 real onboard AMZ frames (1920x1080, no
+/// calibration: a 60-degree pinhole as the guide guesses; one with a cone that gets no range)
+/// when `../shared` holds them, else the rendered sample frame with its calibration.
+fn frames_to_see(dir: &TempDir) -> (Vec<std::path::PathBuf>, std::path::PathBuf) {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let amz = root.join("../shared/data/real-dev/amz-sequence");
+    let mut frames: Vec<_> = std::fs::read_dir(&amz)
+        .map(|entries| {
+            entries
+                .flatten()
+                .map(|e| e.path())
+                .filter(|p| p.extension().is_some_and(|e| e == "jpg"))
+                .collect()
+        })
+        .unwrap_or_default();
+    frames.sort();
+    // Three spread over the drive: the seventh has a cone cut by the frame's bottom edge.
+    let frames: Vec<_> = frames.into_iter().step_by(3).take(3).collect();
+    if frames.is_empty() {
+        eprintln!("no {}: the sample frame instead", amz.display());
+        return (
+            vec![root.join("docs/sample/frame.jpg")],
+            root.join("docs/sample/camera.yaml"),
+        );
+    }
+    let calibration = dir.join("amz-camera.yaml");
+    let f_px = 960.0 / 30_f64.to_radians().tan();
+    std::fs::write(
+        &calibration,
+        format!(
+            "image_width: 1920\nimage_height: 1080\ncamera_name: front\ncamera_matrix:\n  \
+             rows: 3\n  cols: 3\n  data: [{f_px}, 0.0, 960.0, 0.0, {f_px}, 540.0, 0.0, 0.0, 1.0]\n\
+             distortion_model: plumb_bob\ndistortion_coefficients:\n  rows: 1\n  cols: 5\n  \
+             data: [0.0, 0.0, 0.0, 0.0, 0.0]\n"
+        ),
+    )
+    .unwrap();
+    (frames, calibration)
+}
+
+/// Pixels of exactly `colour` in `image`.
+fn pixels_of(image: &image::RgbImage, colour: [u8; 3]) -> usize {
+    image.pixels().filter(|p| p.0 == colour).count()
+}
+
+/// The colour a class is drawn in (`draw::class_colour`).
+fn class_colour(class: &str) -> [u8; 3] {
+    match class {
+        "blue" => [30, 80, 230],
+        "yellow" => [235, 200, 0],
+        "orange" => [255, 120, 0],
+        _ => [220, 70, 0],
+    }
+}
+
+/// Pixels near crimson, the colour of the cross over a cone without a range (its diagonals
+/// are anti-aliased) and of its tag.
+fn crimson(image: &image::RgbImage) -> usize {
+    image
+        .pixels()
+        .filter(|p| {
+            let [r, g, b] = p.0.map(i32::from);
+            r > 150 && g < 80 && (30..120).contains(&b)
+        })
+        .count()
+}
+
+/// A bird's-eye view: 900x900, with a plot drawn on it (not all white).
+fn assert_birds_eye_view(path: &Path) {
+    let bev = image::open(path)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+        .to_rgb8();
+    assert_eq!(bev.dimensions(), (900, 900), "{}", path.display());
+    let drawn = bev.pixels().filter(|p| p.0 != [255, 255, 255]).count();
+    assert!(drawn > 20_000, "{}: {drawn} drawn pixels", path.display());
+}
+
+/// Issue 39, "see it": `predict --save` and `run --out` write annotated frames and bird's-eye
+/// views of frames without truth (neither wrote anything for them). Each annotated frame has
+/// the image's size; where predict found cones, each class's boxes put that many more pixels
+/// of its colour into the frame than the photograph had (half a box outline each at least),
+/// and a cone without a range a crimson cross; each bird's-eye view is a 900x900 plot.
+#[test]
+fn predict_save_and_run_out_draw_what_was_found() {
+    let dir = TempDir::new("see-it");
+    let (frames, calibration) = frames_to_see(&dir);
+    let saved = dir.join("predict");
+    let mut args = vec![
+        "predict".to_owned(),
+        "--camera".to_owned(),
+        calibration.display().to_string(),
+        "--save".to_owned(),
+        saved.display().to_string(),
+    ];
+    args.extend(frames.iter().map(|f| f.display().to_string()));
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let (status, stdout, stderr) = run_within(&dir, "predict", &args, Duration::from_secs(180));
+    assert!(status.success());
+    assert!(stderr.contains(&saved.display().to_string()), "{stderr}");
+    let mut cones_seen = 0;
+    for (line, frame) in stdout.lines().zip(&frames) {
+        let result: serde_json::Value = serde_json::from_str(line).unwrap();
+        let stem = frame.file_stem().unwrap().to_str().unwrap();
+        let original = image::open(frame).unwrap().to_rgb8();
+        let annotated = image::open(saved.join(format!("{stem}.png")))
+            .unwrap()
+            .to_rgb8();
+        assert_eq!(annotated.dimensions(), original.dimensions());
+        assert_birds_eye_view(&saved.join(format!("{stem}_bev.png")));
+        let cones = result["cones"].as_array().unwrap();
+        cones_seen += cones.len();
+        for class in ["blue", "yellow", "orange", "large_orange"] {
+            let outline_px: f64 = cones
+                .iter()
+                .filter(|c| c["class"] == class)
+                .map(|c| {
+                    let b: Vec<f64> = c["bbox_px"]
+                        .as_array()
+                        .unwrap()
+                        .iter()
+                        .map(|v| v.as_f64().unwrap())
+                        .collect();
+                    2.0 * ((b[2] - b[0]) + (b[3] - b[1]))
+                })
+                .sum();
+            let added = pixels_of(&annotated, class_colour(class)) as f64
+                - pixels_of(&original, class_colour(class)) as f64;
+            assert!(
+                added >= 0.5 * outline_px,
+                "{stem}: {added} more {class} pixels for {outline_px} px of box outline"
+            );
+        }
+        if cones.iter().any(|c| c["range_m"].is_null()) {
+            let added = crimson(&annotated).saturating_sub(crimson(&original));
+            assert!(
+                added > 100,
+                "{stem}: no cross ({added} crimson pixels more)"
+            );
+        }
+    }
+    assert!(cones_seen > 0, "no cone found in {frames:?}");
+
+    let folder = dir.join("frames");
+    std::fs::create_dir_all(&folder).unwrap();
+    for frame in &frames {
+        std::fs::copy(frame, folder.join(frame.file_name().unwrap())).unwrap();
+    }
+    let out = dir.join("run");
+    let source = format!("folder:{}", folder.display());
+    let args = [
+        "run",
+        "--source",
+        &source,
+        "--camera-info",
+        calibration.to_str().unwrap(),
+        "--frames",
+        "0",
+        "--rate-hz",
+        "0",
+        "--save-every",
+        "1",
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    let (status, stdout, _) = run_within(&dir, "run", &args, Duration::from_secs(180));
+    assert!(status.success());
+    assert!(stdout.contains(&out.display().to_string()), "{stdout}");
+    let (width, height) = image::image_dimensions(&frames[0]).unwrap();
+    for sequence in 0..frames.len() {
+        let annotated = image::open(out.join(format!("frame_{sequence:04}.png")))
+            .unwrap()
+            .to_rgb8();
+        assert_eq!(annotated.dimensions(), (width, height));
+        let coloured: usize = ["blue", "yellow", "orange", "large_orange"]
+            .iter()
+            .map(|c| pixels_of(&annotated, class_colour(c)))
+            .sum();
+        assert!(
+            coloured > 200,
+            "frame {sequence}: {coloured} cone-coloured pixels"
+        );
+        assert_birds_eye_view(&out.join(format!("frame_{sequence:04}_bev.png")));
+    }
 }
