@@ -1,4 +1,4 @@
-//! `conesight dashboard` (and `conesight run --dashboard ADDR`): one web page served by axum,
+//! `conesight dashboard` (and `conesight run --dashboard-addr ADDR`): one web page served by axum,
 //! no build step and nothing fetched from elsewhere (the page is `dashboard.html`, inline
 //! JavaScript drawing on a canvas). It shows a live bird's-eye map of the cones in the vehicle
 //! frame (metres, axes, colour by class, 1-sigma ellipses from the covariance), the latest

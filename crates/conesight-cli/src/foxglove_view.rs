@@ -1,4 +1,4 @@
-//! `conesight foxglove` (and `conesight run --foxglove ADDR`): a live view for the Foxglove app
+//! `conesight foxglove` (and `conesight run --foxglove-addr ADDR`): a live view for the Foxglove app
 //! through the official SDK's WebSocket server (`foxglove` crate, default
 //! ws://127.0.0.1:8765, Foxglove's own default, so "Open connection" in the app finds it).
 //!

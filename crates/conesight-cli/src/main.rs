@@ -27,6 +27,8 @@ mod demo_frame;
 mod diff_cmd;
 mod draw;
 mod echo_cmd;
+#[cfg(test)]
+mod flag_mentions;
 mod foxglove_view;
 mod job_cmd;
 mod keypoints_cmd;

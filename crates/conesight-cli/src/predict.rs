@@ -278,7 +278,8 @@ pub fn detections_json(result: &FrameResult) -> Vec<Value> {
         .collect()
 }
 
-/// The JSON cones of a frame: every keypoint set, with its position when the PnP placed it.
+/// The JSON cones of a frame: every keypoint set, with its position when the PnP placed it,
+/// else `null` position, range, covariance and ranging and the reason in `pnp_error`.
 pub fn cones_json(result: &FrameResult, with_vehicle: bool) -> Vec<Value> {
     result
         .keypoints
@@ -305,9 +306,14 @@ pub fn cones_json(result: &FrameResult, with_vehicle: bool) -> Vec<Value> {
                     value["position_vehicle_m"] = json!([v.x, v.y, v.z]);
                 }
             } else {
+                // The same keys as a placed cone's, null, and why.
                 value["position_camera_m"] = Value::Null;
                 value["range_m"] = Value::Null;
                 value["covariance_m2"] = Value::Null;
+                value["ranging"] = Value::Null;
+                if with_vehicle {
+                    value["position_vehicle_m"] = Value::Null;
+                }
                 let reason = result.failed.iter().find(|(i, _)| *i == index).map(|(_, e)| e.clone());
                 value["pnp_error"] = json!(reason);
             }

@@ -129,12 +129,14 @@ pub struct RunArgs {
     /// (camera, detector, keypoints, localiser order); none when absent.
     #[arg(long = "http-base-port")]
     http_base_port: Option<u16>,
-    /// Serve the web dashboard of this run here too (e.g. 127.0.0.1:8080).
-    #[arg(long)]
-    dashboard: Option<std::net::SocketAddr>,
-    /// Serve the Foxglove live view of this run here too (e.g. 127.0.0.1:8765).
-    #[arg(long)]
-    foxglove: Option<std::net::SocketAddr>,
+    /// Serve the web dashboard of this run here too (e.g. 127.0.0.1:8080), as `conesight
+    /// dashboard --dashboard-addr` does (`--dashboard` still works).
+    #[arg(long = "dashboard-addr", alias = "dashboard")]
+    dashboard_addr: Option<std::net::SocketAddr>,
+    /// Serve the Foxglove live view of this run here too (e.g. 127.0.0.1:8765), as
+    /// `conesight foxglove --foxglove-addr` does (`--foxglove` still works).
+    #[arg(long = "foxglove-addr", alias = "foxglove")]
+    foxglove_addr: Option<std::net::SocketAddr>,
     /// Output folder of the annotated frames and bird's-eye views (`frame_NNNN.png`,
     /// `frame_NNNN_bev.png`), whatever the source.
     #[arg(long, default_value = "out/run")]
@@ -251,11 +253,11 @@ async fn run_async(args: RunArgs) -> anyhow::Result<()> {
         open_session(&CommonArgs::for_camera(args.zenoh.clone(), &args.camera).zenoh_with_limits())
             .await?;
     let topics = Topics::from_args(&args.zenoh)?;
-    if let Some(addr) = args.dashboard {
+    if let Some(addr) = args.dashboard_addr {
         let bound = crate::dashboard::serve(&session, &topics, addr, &shutdown).await?;
         println!("dashboard: http://{bound}/");
     }
-    if let Some(addr) = args.foxglove {
+    if let Some(addr) = args.foxglove_addr {
         let bound = crate::foxglove_view::serve(&session, &topics, addr, &shutdown).await?;
         println!("foxglove: ws://{bound}");
     }
@@ -407,4 +409,47 @@ async fn wait_until_loaded(
         tokio::time::sleep(Duration::from_millis(10)).await;
     }
     tracing::warn!("services still loading after {limit:?}; starting the camera anyway");
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+
+    use super::*;
+    use clap::{CommandFactory, Parser};
+
+    #[derive(Debug, clap::Parser)]
+    struct Test {
+        #[command(flatten)]
+        args: RunArgs,
+    }
+
+    /// One name for the live views' addresses, as their own commands spell it
+    /// (`--dashboard-addr`, `--foxglove-addr`); the old `--dashboard` and `--foxglove` still
+    /// parse, out of the help.
+    #[test]
+    fn the_live_views_addresses_have_one_name_and_the_old_ones_still_work() {
+        for (dashboard, foxglove) in [
+            ("--dashboard-addr", "--foxglove-addr"),
+            ("--dashboard", "--foxglove"),
+        ] {
+            let args = Test::try_parse_from([
+                "run",
+                dashboard,
+                "127.0.0.1:8080",
+                foxglove,
+                "127.0.0.1:8765",
+            ])
+            .unwrap()
+            .args;
+            assert_eq!(args.dashboard_addr.unwrap().port(), 8080);
+            assert_eq!(args.foxglove_addr.unwrap().port(), 8765);
+        }
+        let help = Test::command().render_long_help().to_string();
+        assert!(help.contains("--dashboard-addr") && help.contains("--foxglove-addr"));
+        assert!(
+            !help.contains("--dashboard <") && !help.contains("--foxglove <"),
+            "{help}"
+        );
+    }
 }

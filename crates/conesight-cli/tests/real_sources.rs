@@ -186,6 +186,69 @@ fn run_on_a_folder_ends_at_its_last_image_unless_looped() {
     assert_eq!(frames_with_cones(&stdout), 7, "{stdout}");
 }
 
+/// Issue 39: on a source without truth the run's table showed `matched 0/0`, `err_m -` and
+/// "out of ? sent", and an unlabelled maximum range. Its table now has no truth column, names
+/// the farthest cone's column `max_range_m` and says what each column is; the summary claims
+/// no count of frames sent.
+#[test]
+fn run_without_truth_labels_its_columns_and_has_no_truth_ones() {
+    let dir = TempDir::new("run-table");
+    let calibration = dir.join("camera.yaml");
+    camera_yaml(&calibration, 64, 48);
+    let images = dir.join("images");
+    std::fs::create_dir_all(&images).unwrap();
+    for i in 0..2 {
+        grey_png(&images.join(format!("{i:03}.png")), 64, 48);
+    }
+    let source = format!("folder:{}", images.display());
+    let out = dir.join("out");
+    let args = [
+        "run",
+        "--source",
+        &source,
+        "--camera-info",
+        calibration.to_str().unwrap(),
+        "--rate-hz",
+        "0",
+        "--save-every",
+        "0",
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    let (status, stdout, _) = run_within(&dir, "table", &args, Duration::from_secs(120));
+    assert!(status.success());
+    let header = stdout
+        .lines()
+        .find(|l| l.trim_start().starts_with("t_s"))
+        .unwrap_or_else(|| panic!("no table header in\n{stdout}"));
+    let columns: Vec<&str> = header.split_whitespace().collect();
+    assert_eq!(
+        columns,
+        [
+            "t_s",
+            "frames",
+            "hz",
+            "cones/f",
+            "max_range_m",
+            "p50_ms",
+            "p99_ms"
+        ]
+    );
+    let legend = stdout
+        .lines()
+        .find(|l| l.starts_with("(t_s:"))
+        .unwrap_or_else(|| panic!("no column legend in\n{stdout}"));
+    for column in &columns {
+        assert!(legend.contains(column), "{column} not explained: {legend}");
+    }
+    assert!(
+        !stdout.contains("matched") && !stdout.contains("err_m"),
+        "{stdout}"
+    );
+    let summary = stdout.lines().find(|l| l.starts_with("summary:")).unwrap();
+    assert!(!summary.contains("out of"), "{summary}");
+}
+
 /// The frames the pictures are tested on: 3 real onboard AMZ frames (1920x1080, no
 /// calibration: a 60-degree pinhole as the guide guesses; one with a cone that gets no range)
 /// when `../shared` holds them, else the rendered sample frame with its calibration.
