@@ -37,6 +37,7 @@ mod record_cmd;
 mod replay_cmd;
 mod run;
 mod run_monitor;
+mod run_table;
 mod status_cmd;
 
 use clap::{Parser, Subcommand};

@@ -376,7 +376,7 @@ async fn run_async(args: RunArgs) -> anyhow::Result<()> {
         tracing::warn!(%error, "closing the Zenoh session");
     }
     // A run that failed before any cones came has no summary to give, only the error.
-    if !(summary.is_empty() && !failures.is_empty()) {
+    if !summary.is_empty() || failures.is_empty() {
         summary.print(args.frames, args.save_every, &args.out);
     }
     let mut failures = failures.into_iter();

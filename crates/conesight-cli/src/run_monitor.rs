@@ -1,8 +1,8 @@
-//! What `conesight run` shows of its pipeline: one more consumer of its streams that prints
-//! the live table (with the truth columns only when the source is the renderer), the
-//! summary, and saves every `--save-every`-th frame with cones as an annotated frame and a
-//! bird's-eye view (`draw::save_frame`), whatever the source: the frames are taken off the bus
-//! (copied out, the last 64 MiB kept until their cones come) and written on a blocking thread.
+//! What `conesight run` shows of its pipeline: one more consumer of its streams that keeps
+//! what the live table and the summary need (`run_table` prints them), and saves every
+//! `--save-every`-th frame with cones as an annotated frame and a bird's-eye view
+//! (`draw::save_frame`), whatever the source: the frames are taken off the bus (copied out,
+//! the last 64 MiB kept until their cones come) and written on a blocking thread.
 
 use std::collections::{BTreeMap, VecDeque};
 use std::path::{Path, PathBuf};
@@ -13,12 +13,12 @@ use conesight_bus::zenoh::bytes::ZBytes;
 use conesight_bus::{RingSubscriber, Stream, Topics, declare_subscriber, decode};
 use conesight_camera_service::CameraFrame;
 use conesight_core::Camera;
-use conesight_pipeline::stats::{fmt_opt, median, percentile};
 use conesight_pipeline::{Shutdown, match_cones};
 use conesight_proto::{ConeKeypoints, LocatedCone, now_ns, pb};
 
 use crate::bev::BevCone;
 use crate::draw::{FieldOfView, SavedFrame, cones_of_frame, save_frame};
+use crate::run_table::{Summary, outcome, print_header, print_row};
 
 /// After the camera's last frame, wait this long for the pipeline to drain.
 const DRAIN_TIMEOUT: Duration = Duration::from_secs(3);
@@ -71,17 +71,6 @@ impl Watch<'_> {
     }
 }
 
-/// One frame's outcome as seen on the `cones` stream.
-#[derive(Debug, Clone)]
-struct FrameOutcome {
-    cones: usize,
-    farthest_m: Option<f64>,
-    latency_ms: f64,
-    errors_m: Vec<f64>,
-    relative_errors: Vec<f64>,
-    usable_truth: usize,
-}
-
 /// The streams of the run, watched.
 pub struct Monitor {
     cones: RingSubscriber,
@@ -89,25 +78,6 @@ pub struct Monitor {
     detections: RingSubscriber,
     frames: RingSubscriber,
     camera_info: RingSubscriber,
-}
-
-/// What the monitor saw.
-pub struct Summary {
-    outcomes: BTreeMap<u64, FrameOutcome>,
-    detections_seen: u64,
-    keypoints_seen: u64,
-    elapsed_secs: f64,
-    with_truth: bool,
-    saved: Vec<SavedFrame>,
-    save_errors: Vec<String>,
-    save_skipped: u64,
-}
-
-impl Summary {
-    /// True when no cones message came.
-    pub fn is_empty(&self) -> bool {
-        self.outcomes.is_empty()
-    }
 }
 
 /// A frame to save: its payload as published and what was found on it.
@@ -222,14 +192,8 @@ impl Monitor {
     ) -> Summary {
         let with_truth = watch.truth.is_some();
         let mut summary = Summary {
-            outcomes: BTreeMap::new(),
-            detections_seen: 0,
-            keypoints_seen: 0,
-            elapsed_secs: 0.0,
             with_truth,
-            saved: Vec::new(),
-            save_errors: Vec::new(),
-            save_skipped: 0,
+            ..Summary::default()
         };
         let mut writer = (watch.save_every > 0).then(|| FrameWriter::start(&watch.out));
         let mut frames_kept: VecDeque<(u64, ZBytes)> = VecDeque::new();
@@ -355,199 +319,5 @@ fn take_keypoints(
     kept.insert(sequence, message.to_core().unwrap_or_default());
     while kept.len() > KEYPOINTS_KEPT {
         kept.pop_first();
-    }
-}
-
-fn outcome(cones: &[LocatedCone], truth: Option<&CameraFrame>, latency_ms: f64) -> FrameOutcome {
-    let (errors_m, relative_errors, usable_truth) = match truth.and_then(|f| f.frame.truth.as_ref())
-    {
-        Some(truth) => {
-            let matches: Vec<_> = match_cones(cones, truth)
-                .into_iter()
-                .filter(|m| m.usable)
-                .collect();
-            (
-                matches.iter().map(|m| m.error_m).collect(),
-                matches.iter().map(|m| m.relative_error).collect(),
-                truth.usable_count(),
-            )
-        }
-        None => (Vec::new(), Vec::new(), 0),
-    };
-    FrameOutcome {
-        cones: cones.len(),
-        farthest_m: cones
-            .iter()
-            .map(|c| c.estimate.range_m())
-            .max_by(f64::total_cmp),
-        latency_ms,
-        errors_m,
-        relative_errors,
-        usable_truth,
-    }
-}
-
-/// The table's header and what its columns are; the truth columns only with truth.
-fn print_header(with_truth: bool) {
-    if with_truth {
-        println!(
-            "{:>5} {:>6} {:>6} {:>7} {:>11} {:>8} {:>9} {:>9} {:>7} {:>7}",
-            "t_s",
-            "frames",
-            "hz",
-            "cones/f",
-            "max_range_m",
-            "matched",
-            "err_m",
-            "err_%",
-            "p50_ms",
-            "p99_ms"
-        );
-        println!(
-            "(t_s: seconds since the start; frames: frames with cones so far; hz: of them in the \
-             last second; cones/f: median cones per frame; max_range_m: the farthest cone, m; \
-             matched: cones matched to usable true cones / usable true cones; err_m, err_%: \
-             median position error, m and % of range; p50_ms, p99_ms: end-to-end latency, \
-             acquisition to cones, ms)"
-        );
-    } else {
-        println!(
-            "{:>5} {:>6} {:>6} {:>7} {:>11} {:>7} {:>7}",
-            "t_s", "frames", "hz", "cones/f", "max_range_m", "p50_ms", "p99_ms"
-        );
-        println!(
-            "(t_s: seconds since the start; frames: frames with cones so far; hz: of them in the \
-             last second; cones/f: median cones per frame; max_range_m: the farthest cone, m; \
-             p50_ms, p99_ms: end-to-end latency, acquisition to cones, ms; no truth for this \
-             source, so no error columns)"
-        );
-    }
-}
-
-fn print_row(t_s: f64, summary: &Summary, window: &[u64]) {
-    let outcomes: Vec<&FrameOutcome> = window
-        .iter()
-        .filter_map(|s| summary.outcomes.get(s))
-        .collect();
-    let cones: Vec<f64> = outcomes.iter().map(|o| o.cones as f64).collect();
-    let farthest: Vec<f64> = outcomes.iter().filter_map(|o| o.farthest_m).collect();
-    let latency: Vec<f64> = outcomes.iter().map(|o| o.latency_ms).collect();
-    let common = format!(
-        "{:>5.1} {:>6} {:>6} {:>7} {:>11}",
-        t_s,
-        summary.outcomes.len(),
-        window.len(),
-        fmt_opt(median(&cones), 1),
-        fmt_opt(percentile(&farthest, 100.0), 1),
-    );
-    let latency = format!(
-        "{:>7} {:>7}",
-        fmt_opt(percentile(&latency, 50.0), 1),
-        fmt_opt(percentile(&latency, 99.0), 1),
-    );
-    if !summary.with_truth {
-        println!("{common} {latency}");
-        return;
-    }
-    let errors: Vec<f64> = outcomes
-        .iter()
-        .flat_map(|o| o.errors_m.iter().copied())
-        .collect();
-    let relative: Vec<f64> = outcomes
-        .iter()
-        .flat_map(|o| o.relative_errors.iter().map(|e| 100.0 * e))
-        .collect();
-    let usable: usize = outcomes.iter().map(|o| o.usable_truth).sum();
-    println!(
-        "{common} {:>8} {:>9} {:>9} {latency}",
-        format!("{}/{}", errors.len(), usable),
-        fmt_opt(median(&errors), 3),
-        fmt_opt(median(&relative), 2),
-    );
-}
-
-impl Summary {
-    /// Prints the summary: frames, cones, latency, the error against the truth (with truth),
-    /// and where the saved frames went.
-    pub fn print(&self, frames_asked: u64, save_every: u64, out: &Path) {
-        let all: Vec<&FrameOutcome> = self.outcomes.values().collect();
-        let latency: Vec<f64> = all.iter().map(|o| o.latency_ms).collect();
-        let cones: usize = all.iter().map(|o| o.cones).sum();
-        let farthest: Vec<f64> = all.iter().filter_map(|o| o.farthest_m).collect();
-        let sent = if self.with_truth && frames_asked > 0 {
-            format!(" out of {frames_asked} sent")
-        } else {
-            String::new()
-        };
-        println!(
-            "\nsummary: {} frames with cones{sent} ({:.1} s, {:.1} Hz); {} detections and {} keypoints messages seen",
-            all.len(),
-            self.elapsed_secs,
-            all.len() as f64 / self.elapsed_secs.max(1e-9),
-            self.detections_seen,
-            self.keypoints_seen
-        );
-        if self.with_truth {
-            let errors: Vec<f64> = all
-                .iter()
-                .flat_map(|o| o.errors_m.iter().copied())
-                .collect();
-            let relative: Vec<f64> = all
-                .iter()
-                .flat_map(|o| o.relative_errors.iter().map(|e| 100.0 * e))
-                .collect();
-            let usable: usize = all.iter().map(|o| o.usable_truth).sum();
-            println!(
-                "  cones: {cones} ({:.1} per frame); matched to usable true cones: {}/{usable}; position error median {} m ({} % of range), p90 {} m",
-                cones as f64 / all.len().max(1) as f64,
-                errors.len(),
-                fmt_opt(median(&errors), 3),
-                fmt_opt(median(&relative), 2),
-                fmt_opt(percentile(&errors, 90.0), 3),
-            );
-        } else {
-            println!(
-                "  cones: {cones} ({:.1} per frame), the farthest at {} m",
-                cones as f64 / all.len().max(1) as f64,
-                fmt_opt(percentile(&farthest, 100.0), 1),
-            );
-        }
-        println!(
-            "  end-to-end latency (acquisition -> cones received): p50 {} ms, p99 {} ms, max {} ms",
-            fmt_opt(percentile(&latency, 50.0), 1),
-            fmt_opt(percentile(&latency, 99.0), 1),
-            fmt_opt(percentile(&latency, 100.0), 1)
-        );
-        if save_every == 0 {
-            return;
-        }
-        match (self.saved.first(), self.saved.last()) {
-            (Some(first), Some(last)) => println!(
-                "  saved {} annotated frames and bird's-eye views ({}) in {}: {} and {} ... {} (boxes in cone colour with class, score and range; keypoints magenta; a crimson cross where the range failed)",
-                self.saved.len(),
-                if save_every == 1 {
-                    "every frame with cones".to_owned()
-                } else {
-                    format!("one frame with cones in {save_every}")
-                },
-                out.display(),
-                first.frame.display(),
-                first.bev.display(),
-                last.frame.display(),
-            ),
-            _ => println!(
-                "  no frame saved in {} (no frame with cones came)",
-                out.display()
-            ),
-        }
-        if self.save_skipped > 0 {
-            println!(
-                "  {} frames due to be saved were skipped: the writer was busy",
-                self.save_skipped
-            );
-        }
-        for error in &self.save_errors {
-            eprintln!("saving a frame failed: {error}");
-        }
     }
 }
