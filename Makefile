@@ -17,7 +17,8 @@ setup-runtime:
 	@bash scripts/setup.sh runtime
 
 ## The main job on the embedded defaults: the four services in one process over an embedded
-## Zenoh session on a synthetic sequence (live table, PNGs in out/run/).
+## Zenoh session on a synthetic sequence (live table, annotated frames and bird's-eye views in
+## out/run/).
 demo: setup-runtime
 	cargo build --release -p conesight-cli
 	./target/release/conesight run

@@ -1,33 +1,52 @@
-//! A bird's-eye-view plot of true and estimated cones (plotters, PNG), and the small drawing
-//! helpers the annotated frames use.
+//! The bird's-eye view of a frame's cones (plotters, PNG): the vehicle frame from above with
+//! its axes in metres, the ground grid, the camera's field of view, each estimate with its
+//! 3-sigma ellipse, and the true cones when the source is the renderer. The view reaches as
+//! far as the farthest cone (32 m at least, 120 m at most). `draw.rs` draws the frame beside
+//! it.
 
 use std::path::Path;
 use std::sync::OnceLock;
 
 use conesight_core::cone::ConeClass;
-use image::{Rgb, RgbImage};
+use conesight_proto::LocatedCone;
+use image::Rgb;
 use nalgebra::{Matrix2, Matrix3, Point3, SymmetricEigen};
 use plotters::prelude::*;
 use plotters::style::FontStyle;
 
+use crate::draw::class_colour;
+
 /// One cone to plot, vehicle frame (x forward, y left).
+#[derive(Debug, Clone, PartialEq)]
 pub struct BevCone {
-    /// Colour of the disc.
+    /// Colour of its disc.
     pub class: ConeClass,
-    /// Where the cone is.
-    pub truth_in_vehicle: Point3<f64>,
+    /// Where the cone is, when known (the renderer's truth).
+    pub truth_in_vehicle: Option<Point3<f64>>,
     /// Where the solver put it.
     pub estimate_in_vehicle: Point3<f64>,
     /// Covariance of the estimate, vehicle frame, m^2.
     pub covariance_in_vehicle: Matrix3<f64>,
 }
 
+impl BevCone {
+    /// A located cone, without truth.
+    pub fn estimate(cone: &LocatedCone) -> Self {
+        Self {
+            class: cone.detection.class,
+            truth_in_vehicle: None,
+            estimate_in_vehicle: cone.position_in_vehicle,
+            covariance_in_vehicle: cone.covariance_in_vehicle_m2,
+        }
+    }
+}
+
 /// Plot size in pixels.
 const SIZE_PX: u32 = 900;
-/// Metres shown ahead of the vehicle.
+/// Metres shown ahead of the vehicle at least (half as many to each side).
 const AHEAD_M: f64 = 32.0;
-/// Metres shown to each side.
-const SIDE_M: f64 = 16.0;
+/// Metres shown ahead at most: farther cones are counted in the caption, not drawn.
+const MAX_AHEAD_M: f64 = 120.0;
 /// The font of the plot's text (DejaVu Sans Mono, Bitstream Vera licence:
 /// `assets/DejaVu-LICENSE.txt`), embedded so that a plot never depends on the fonts a host has.
 static FONT: &[u8] = include_bytes!("../assets/DejaVuSansMono.ttf");
@@ -42,53 +61,16 @@ pub(crate) fn register_font() -> anyhow::Result<()> {
     Ok(())
 }
 
-pub(crate) fn class_colour(class: ConeClass) -> Rgb<u8> {
-    match class {
-        ConeClass::Blue => Rgb([30, 80, 230]),
-        ConeClass::Yellow => Rgb([235, 200, 0]),
-        ConeClass::Orange => Rgb([255, 120, 0]),
-        ConeClass::LargeOrange => Rgb([220, 70, 0]),
-    }
-}
-
-fn put(image: &mut RgbImage, x: f64, y: f64, colour: Rgb<u8>) {
-    if x >= 0.0 && y >= 0.0 && x < f64::from(image.width()) && y < f64::from(image.height()) {
-        // Truncation is the intended pixel lookup here.
-        #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
-        image.put_pixel(x as u32, y as u32, colour);
-    }
-}
-
-/// Annotated frames: a line straight into the image.
-pub(crate) fn line(image: &mut RgbImage, from: (f64, f64), to: (f64, f64), colour: Rgb<u8>) {
-    let steps = (to.0 - from.0)
-        .abs()
-        .max((to.1 - from.1).abs())
-        .ceil()
-        .max(1.0);
-    let n = steps as usize;
-    for i in 0..=n {
-        let t = i as f64 / steps;
-        put(
-            image,
-            from.0 + t * (to.0 - from.0),
-            from.1 + t * (to.1 - from.1),
-            colour,
-        );
-    }
-}
-
-/// Annotated frames: a filled disc straight into the image.
-pub(crate) fn disc(image: &mut RgbImage, centre: (f64, f64), radius_px: f64, colour: Rgb<u8>) {
-    let r = radius_px.ceil() as i64;
-    for dy in -r..=r {
-        for dx in -r..=r {
-            let (dx, dy) = (dx as f64, dy as f64);
-            if dx * dx + dy * dy <= radius_px * radius_px {
-                put(image, centre.0 + dx, centre.1 + dy, colour);
-            }
-        }
-    }
+/// Metres shown ahead for `cones`: the farthest (estimate or truth) with a margin, in steps of
+/// 8 m, within [`AHEAD_M`, `MAX_AHEAD_M`].
+fn reach_m(cones: &[BevCone]) -> f64 {
+    let farthest = cones
+        .iter()
+        .flat_map(|c| std::iter::once(c.estimate_in_vehicle).chain(c.truth_in_vehicle))
+        .map(|p| p.x.max(2.0 * p.y.abs()))
+        .filter(|x| x.is_finite())
+        .fold(0.0, f64::max);
+    (((farthest + 4.0) / 8.0).ceil() * 8.0).clamp(AHEAD_M, MAX_AHEAD_M)
 }
 
 /// The 3-sigma ellipse of the horizontal (x, y) part of a covariance, as plot points
@@ -118,36 +100,58 @@ fn plot_colour(class: ConeClass) -> RGBColor {
     RGBColor(r, g, b)
 }
 
-fn class_label(class: ConeClass) -> &'static str {
-    match class {
-        ConeClass::Blue => "blue cone (truth)",
-        ConeClass::Yellow => "yellow cone (truth)",
-        ConeClass::Orange => "orange cone (truth)",
-        ConeClass::LargeOrange => "large orange cone (truth)",
-    }
+fn class_label(class: ConeClass, truth: bool) -> String {
+    let name = match class {
+        ConeClass::Blue => "blue cone",
+        ConeClass::Yellow => "yellow cone",
+        ConeClass::Orange => "orange cone",
+        ConeClass::LargeOrange => "large orange cone",
+    };
+    format!("{name} ({})", if truth { "truth" } else { "estimate" })
 }
 
 /// Writes the plot (plotters): the vehicle frame seen from above, x ahead up the page and y
-/// left to the left, axes and grid in metres, the camera's horizontal field of view, true
-/// cones as discs in their class colour, estimates as black crosses with their 3-sigma
-/// ellipses, and a legend.
+/// left to the left, axes and grid in metres out to the farthest cone, the camera's horizontal
+/// field of view (`(image width, fx)` in pixels, when known), each estimate's 3-sigma ellipse
+/// and a legend. With truth, true cones are discs in their class colour and estimates black
+/// crosses; without, the estimates are the discs. `unranged` cones the solver could not place
+/// are counted in the caption, as are cones beyond the farthest reach shown.
 pub fn write_bev_png(
     path: &Path,
     cones: &[BevCone],
-    image_width_px: u32,
-    focal_px: f64,
+    field_of_view: Option<(u32, f64)>,
+    unranged: usize,
 ) -> anyhow::Result<()> {
     register_font()?;
+    let ahead_m = reach_m(cones);
+    let side_m = ahead_m / 2.0;
+    let inside = |p: &Point3<f64>| p.x >= 0.0 && p.x <= ahead_m && p.y.abs() <= side_m;
+    let with_truth = cones.iter().any(|c| c.truth_in_vehicle.is_some());
+    let outside = cones
+        .iter()
+        .filter(|c| !inside(&c.estimate_in_vehicle))
+        .count();
+    let mut caption = "Cones from above, vehicle frame".to_owned();
+    let mut notes = Vec::new();
+    if unranged > 0 {
+        notes.push(format!("{unranged} without a range"));
+    }
+    if outside > 0 {
+        notes.push(format!("{outside} out of view"));
+    }
+    if !notes.is_empty() {
+        caption = format!("{caption} ({} not shown)", notes.join(", "));
+    }
     let draw = || -> Result<(), Box<dyn std::error::Error>> {
         let root = BitMapBackend::new(path, (SIZE_PX, SIZE_PX)).into_drawing_area();
         root.fill(&WHITE)?;
         // Plot x is -y (so left of the car is left on the page); its labels show y.
         let mut chart = ChartBuilder::on(&root)
-            .caption("Cones from above, vehicle frame", ("sans-serif", 22))
+            .caption(caption.as_str(), ("sans-serif", 22))
             .margin(12)
             .x_label_area_size(44)
             .y_label_area_size(56)
-            .build_cartesian_2d(-SIDE_M..SIDE_M, 0.0..AHEAD_M)?;
+            .build_cartesian_2d(-side_m..side_m, 0.0..ahead_m)?;
         chart
             .configure_mesh()
             .x_desc("y: left of the car (m)")
@@ -162,44 +166,58 @@ pub fn write_bev_png(
             .bold_line_style(RGBColor(205, 205, 205))
             .draw()?;
 
-        let half_fov = (f64::from(image_width_px) / 2.0 / focal_px).atan();
-        let reach = SIDE_M.min(AHEAD_M * half_fov.tan());
-        let fov = [
-            (reach, reach / half_fov.tan()),
-            (0.0, 0.0),
-            (-reach, reach / half_fov.tan()),
-        ];
-        chart
-            .draw_series(LineSeries::new(
-                fov,
-                RGBColor(110, 170, 110).stroke_width(2),
-            ))?
-            .label("camera field of view")
-            .legend(|(x, y)| {
-                PathElement::new(
-                    [(x, y), (x + 18, y)],
+        if let Some((image_width_px, focal_px)) = field_of_view {
+            let half_fov = (f64::from(image_width_px) / 2.0 / focal_px).atan();
+            let reach = side_m.min(ahead_m * half_fov.tan());
+            let fov = [
+                (reach, reach / half_fov.tan()),
+                (0.0, 0.0),
+                (-reach, reach / half_fov.tan()),
+            ];
+            chart
+                .draw_series(LineSeries::new(
+                    fov,
                     RGBColor(110, 170, 110).stroke_width(2),
-                )
-            });
+                ))?
+                .label("camera field of view")
+                .legend(|(x, y)| {
+                    PathElement::new(
+                        [(x, y), (x + 18, y)],
+                        RGBColor(110, 170, 110).stroke_width(2),
+                    )
+                });
+        }
 
+        let disc_at = |c: &BevCone| {
+            if with_truth {
+                c.truth_in_vehicle
+            } else {
+                Some(c.estimate_in_vehicle)
+            }
+        };
         let mut classes: Vec<ConeClass> = cones.iter().map(|c| c.class).collect();
         classes.sort();
         classes.dedup();
         for class in classes {
             let colour = plot_colour(class);
             chart
-                .draw_series(cones.iter().filter(|c| c.class == class).map(|c| {
-                    Circle::new(
-                        (-c.truth_in_vehicle.y, c.truth_in_vehicle.x),
-                        6,
-                        colour.filled(),
-                    )
-                }))?
-                .label(class_label(class))
+                .draw_series(
+                    cones
+                        .iter()
+                        .filter(|c| c.class == class)
+                        .filter_map(disc_at)
+                        .filter(inside)
+                        .map(|p| Circle::new((-p.y, p.x), 6, colour.filled())),
+                )?
+                .label(class_label(class, with_truth))
                 .legend(move |(x, y)| Circle::new((x + 9, y), 6, colour.filled()));
         }
         let grey = RGBColor(130, 130, 130);
-        for (i, cone) in cones.iter().enumerate() {
+        for (i, cone) in cones
+            .iter()
+            .filter(|c| inside(&c.estimate_in_vehicle))
+            .enumerate()
+        {
             let series = chart.draw_series(LineSeries::new(
                 ellipse(&cone.estimate_in_vehicle, &cone.covariance_in_vehicle),
                 grey,
@@ -210,16 +228,18 @@ pub fn write_bev_png(
                     .legend(move |(x, y)| PathElement::new([(x, y), (x + 18, y)], grey));
             }
         }
-        chart
-            .draw_series(cones.iter().map(|c| {
-                Cross::new(
-                    (-c.estimate_in_vehicle.y, c.estimate_in_vehicle.x),
-                    5,
-                    BLACK.stroke_width(2),
-                )
-            }))?
-            .label("estimate")
-            .legend(|(x, y)| Cross::new((x + 9, y), 5, BLACK.stroke_width(2)));
+        if with_truth {
+            chart
+                .draw_series(
+                    cones
+                        .iter()
+                        .map(|c| c.estimate_in_vehicle)
+                        .filter(inside)
+                        .map(|p| Cross::new((-p.y, p.x), 5, BLACK.stroke_width(2))),
+                )?
+                .label("estimate")
+                .legend(|(x, y)| Cross::new((x + 9, y), 5, BLACK.stroke_width(2)));
+        }
         // Outside the camera's view, where no cone is ever drawn.
         draw_legend(&mut chart, SeriesLabelPosition::LowerRight)?;
         root.present()?;
@@ -256,7 +276,7 @@ mod tests {
         let path = std::env::temp_dir().join(format!("conesight-bev-{}.png", std::process::id()));
         let cone = |class, x: f64, y: f64| BevCone {
             class,
-            truth_in_vehicle: Point3::new(x, y, 0.0),
+            truth_in_vehicle: Some(Point3::new(x, y, 0.0)),
             estimate_in_vehicle: Point3::new(x + 0.3, y + 0.1, 0.0),
             covariance_in_vehicle: Matrix3::from_diagonal_element(0.01),
         };
@@ -264,7 +284,7 @@ mod tests {
             cone(ConeClass::Blue, 10.0, 4.0),
             cone(ConeClass::Yellow, 20.0, -4.0),
         ];
-        write_bev_png(&path, &cones, 1920, 2048.0).unwrap();
+        write_bev_png(&path, &cones, Some((1920, 2048.0)), 0).unwrap();
         let image = image::open(&path).unwrap().to_rgb8();
         let _ = std::fs::remove_file(&path);
         assert_eq!(image.dimensions(), (SIZE_PX, SIZE_PX));
@@ -304,5 +324,42 @@ mod tests {
             .filter(|&(x, y)| image.get_pixel(x, y).0.iter().all(|c| *c < 90))
             .count();
         assert!(dark_in_left_margin > 50, "no axis labels drawn");
+    }
+
+    /// Without truth the estimates are the discs, and the view reaches the farthest cone: one
+    /// at 70 m is drawn in the upper half (the view used to stop at 32 m); one at 500 m is left
+    /// out and counted.
+    #[test]
+    fn estimates_alone_are_drawn_out_to_the_farthest_cone() {
+        let path =
+            std::env::temp_dir().join(format!("conesight-bev-far-{}.png", std::process::id()));
+        let cone = |class, x: f64, y: f64| BevCone {
+            class,
+            truth_in_vehicle: None,
+            estimate_in_vehicle: Point3::new(x, y, 0.0),
+            covariance_in_vehicle: Matrix3::from_diagonal_element(0.04),
+        };
+        let cones = [
+            cone(ConeClass::Blue, 10.0, 2.0),
+            cone(ConeClass::Yellow, 70.0, -5.0),
+            cone(ConeClass::Orange, 500.0, 0.0),
+        ];
+        assert_eq!(reach_m(&cones[..2]), 80.0);
+        write_bev_png(&path, &cones, None, 2).unwrap();
+        let image = image::open(&path).unwrap().to_rgb8();
+        let _ = std::fs::remove_file(&path);
+        let rows_of = |class| -> Vec<u32> {
+            image
+                .enumerate_pixels()
+                .filter(|(x, y, p)| {
+                    **p == class_colour(class) && !(*x > SIZE_PX / 2 && *y > SIZE_PX * 3 / 4)
+                })
+                .map(|(_, y, _)| y)
+                .collect()
+        };
+        let yellow = rows_of(ConeClass::Yellow);
+        assert!(!yellow.is_empty(), "the cone at 70 m is not drawn");
+        assert!(yellow.iter().all(|y| *y < SIZE_PX / 2), "{yellow:?}");
+        assert!(rows_of(ConeClass::Blue).iter().all(|y| *y > SIZE_PX / 2));
     }
 }

@@ -1,4 +1,4 @@
-//! `conesight dashboard` (and `conesight run --dashboard ADDR`): one web page served by axum,
+//! `conesight dashboard` (and `conesight run --dashboard-addr ADDR`): one web page served by axum,
 //! no build step and nothing fetched from elsewhere (the page is `dashboard.html`, inline
 //! JavaScript drawing on a canvas). It shows a live bird's-eye map of the cones in the vehicle
 //! frame (metres, axes, colour by class, 1-sigma ellipses from the covariance), the latest
@@ -6,8 +6,9 @@
 //! found through its liveliness token with its `health` answer.
 //!
 //! Routes: `/` (the page), `/api/state` (JSON: cones, rates, latency, services), `/api/frame.jpg`
-//! (the latest frame with boxes, JPEG, 960 px wide at most). The page polls `/api/state` four
-//! times a second.
+//! (the frame of the latest cones annotated as every conesight frame is, `draw::annotate`:
+//! boxes in cone colour with class, score and range, keypoints, a cross where the range
+//! failed; JPEG, 960 px wide at most). The page polls `/api/state` four times a second.
 
 use std::collections::VecDeque;
 use std::net::SocketAddr;
@@ -24,11 +25,11 @@ use conesight_bus::zenoh::Session;
 use conesight_bus::zenoh::bytes::ZBytes;
 use conesight_bus::{Stream, Topics, ZenohArgs, declare_subscriber, decode};
 use conesight_pipeline::Shutdown;
-use conesight_proto::pb;
-use image::{Rgb, RgbImage};
+use conesight_proto::{ConeKeypoints, LocatedCone, pb};
+use image::RgbImage;
 use serde::Serialize;
 
-use crate::bev::{class_colour, line};
+use crate::draw::{DrawnCone, annotate, cones_of_frame};
 use crate::status_cmd::{ServiceStatus, live_services};
 
 /// The page, served as is.
@@ -43,6 +44,9 @@ const SERVICES_PERIOD: Duration = Duration::from_secs(1);
 /// a pipeline latency after their frame: 14 raw 1920x1200 frames). Copied out of Zenoh's
 /// buffers, so the camera's shared-memory pool is never held.
 const FRAMES_KEPT_BYTES: usize = 96 << 20;
+/// Keypoints messages kept to draw the keypoints (and the cones without a range) of the frame
+/// shown.
+const KEYPOINTS_KEPT: usize = 16;
 
 /// Arguments of `conesight dashboard`.
 #[derive(Debug, clap::Args)]
@@ -86,7 +90,10 @@ struct Snapshot {
 #[derive(Default)]
 struct Inner {
     snapshot: Snapshot,
-    cone_boxes: Vec<(conesight_core::ConeClass, [f64; 4])>,
+    /// The latest cones (those of `snapshot.sequence`).
+    located: Vec<LocatedCone>,
+    /// (sequence, keypoints) of the latest keypoints messages.
+    keypoints: VecDeque<(u64, Vec<ConeKeypoints>)>,
     cone_times: VecDeque<Instant>,
     frame_times: VecDeque<Instant>,
     /// (sequence, payload) of the latest frames.
@@ -138,6 +145,12 @@ pub async fn serve(
         declare_subscriber(session, topics.all_cameras(Stream::Cones)?, Stream::Cones).await?;
     let frames =
         declare_subscriber(session, topics.all_cameras(Stream::Frame)?, Stream::Frame).await?;
+    let keypoints = declare_subscriber(
+        session,
+        topics.all_cameras(Stream::Keypoints)?,
+        Stream::Keypoints,
+    )
+    .await?;
     // A late start still shows the latest cones at once.
     if let Ok(replies) = session
         .get(topics.all_cameras(Stream::Cones)?)
@@ -162,6 +175,10 @@ pub async fn serve(
                     },
                     sample = frames.recv_async() => match sample {
                         Ok(sample) => on_frame(&shared, &sample),
+                        Err(_) => break,
+                    },
+                    sample = keypoints.recv_async() => match sample {
+                        Ok(sample) => on_keypoints(&shared, &sample),
                         Err(_) => break,
                     },
                 }
@@ -228,7 +245,6 @@ fn on_cones(shared: &Shared, sample: &conesight_bus::zenoh::sample::Sample) {
         Err(error) => return report(shared, format!("{key}: {error}")),
     };
     let mut views = Vec::with_capacity(located.len());
-    let mut boxes = Vec::with_capacity(located.len());
     for cone in &located {
         let p = cone.position_in_vehicle;
         let c = cone.covariance_in_vehicle_m2;
@@ -247,11 +263,6 @@ fn on_cones(shared: &Shared, sample: &conesight_bus::zenoh::sample::Sample) {
             range_m: cone.estimate.position_in_camera.coords.norm(),
             ranging: format!("{:?}", cone.ranging),
         });
-        let b = cone.detection.box_px;
-        boxes.push((
-            cone.detection.class,
-            [b.x_min_px, b.y_min_px, b.x_max_px, b.y_max_px],
-        ));
     }
     let header = message.header.clone().unwrap_or_default();
     let now = Instant::now();
@@ -263,7 +274,25 @@ fn on_cones(shared: &Shared, sample: &conesight_bus::zenoh::sample::Sample) {
     snapshot.cones = views;
     snapshot.cones_messages += 1;
     snapshot.latency_ms = Some(message.latency_ns as f64 / 1e6);
-    inner.cone_boxes = boxes;
+    inner.located = located;
+}
+
+fn on_keypoints(shared: &Shared, sample: &conesight_bus::zenoh::sample::Sample) {
+    let key = sample.key_expr().to_string();
+    let message = match decode::<pb::Keypoints>(sample.payload()) {
+        Ok(message) => message,
+        Err(error) => return report(shared, format!("{key}: {error}")),
+    };
+    let keypoints = match message.to_core() {
+        Ok(keypoints) => keypoints,
+        Err(error) => return report(shared, format!("{key}: {error}")),
+    };
+    let sequence = message.header.map_or(0, |h| h.frame_sequence);
+    let mut inner = lock(shared);
+    inner.keypoints.push_back((sequence, keypoints));
+    while inner.keypoints.len() > KEYPOINTS_KEPT {
+        inner.keypoints.pop_front();
+    }
 }
 
 fn on_frame(shared: &Shared, sample: &conesight_bus::zenoh::sample::Sample) {
@@ -301,7 +330,7 @@ async fn state(State(shared): State<Shared>) -> impl IntoResponse {
 }
 
 async fn frame_jpeg(State(shared): State<Shared>) -> axum::response::Response {
-    let (sequence, payload, boxes) = {
+    let (sequence, payload, cones) = {
         let inner = lock(&shared);
         let wanted = inner.snapshot.sequence;
         let Some((sequence, payload)) = inner
@@ -319,14 +348,20 @@ async fn frame_jpeg(State(shared): State<Shared>) -> axum::response::Response {
         {
             return jpeg_response(jpeg.clone());
         }
-        let boxes = if sequence == wanted {
-            inner.cone_boxes.clone()
+        let cones = if sequence == wanted {
+            let keypoints = inner
+                .keypoints
+                .iter()
+                .rev()
+                .find(|(s, _)| *s == sequence)
+                .map_or(&[][..], |(_, k)| k.as_slice());
+            cones_of_frame(keypoints, &inner.located)
         } else {
             Vec::new()
         };
-        (sequence, payload, boxes)
+        (sequence, payload, cones)
     };
-    let annotated = tokio::task::spawn_blocking(move || annotate(&payload, &boxes)).await;
+    let annotated = tokio::task::spawn_blocking(move || annotate_jpeg(&payload, &cones)).await;
     match annotated {
         Ok(Ok(jpeg)) => {
             lock(&shared).jpeg = Some((sequence, jpeg.clone()));
@@ -351,11 +386,8 @@ fn jpeg_response(jpeg: Vec<u8>) -> axum::response::Response {
         .into_response()
 }
 
-/// The frame scaled to [`FRAME_WIDTH_PX`] at most with the cones' boxes, as JPEG.
-fn annotate(
-    payload: &ZBytes,
-    boxes: &[(conesight_core::ConeClass, [f64; 4])],
-) -> anyhow::Result<Vec<u8>> {
+/// The frame scaled to [`FRAME_WIDTH_PX`] at most with its cones drawn, as JPEG.
+fn annotate_jpeg(payload: &ZBytes, cones: &[DrawnCone]) -> anyhow::Result<Vec<u8>> {
     let frame: pb::ImageFrame = decode(payload)?;
     let image = frame.into_rgb()?;
     let scale = (f64::from(FRAME_WIDTH_PX) / f64::from(image.width())).min(1.0);
@@ -372,17 +404,7 @@ fn annotate(
     } else {
         image
     };
-    for (class, [x0, y0, x1, y1]) in boxes {
-        let colour: Rgb<u8> = class_colour(*class);
-        let (x0, y0, x1, y1) = (x0 * scale, y0 * scale, x1 * scale, y1 * scale);
-        for inset in [0.0, 1.0] {
-            let (a, b, c, d) = (x0 - inset, y0 - inset, x1 + inset, y1 + inset);
-            line(&mut image, (a, b), (c, b), colour);
-            line(&mut image, (c, b), (c, d), colour);
-            line(&mut image, (c, d), (a, d), colour);
-            line(&mut image, (a, d), (a, b), colour);
-        }
-    }
+    annotate(&mut image, cones, scale)?;
     let mut jpeg = Vec::new();
     image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpeg, 80).encode_image(&image)?;
     Ok(jpeg)

@@ -137,7 +137,7 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
         let vehicle_from_camera = extrinsics.vehicle_from_camera;
         plotted.push(BevCone {
             class: cone.class,
-            truth_in_vehicle: cone.position_in_vehicle,
+            truth_in_vehicle: Some(cone.position_in_vehicle),
             estimate_in_vehicle: vehicle_from_camera * estimate.position_in_camera,
             covariance_in_vehicle: vehicle_from_camera.rotation.to_rotation_matrix().matrix()
                 * estimate.covariance_m2
@@ -160,7 +160,7 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create output folder {}", args.out.display()))?;
     let png = args.out.join("bev.png");
-    write_bev_png(&png, &plotted, camera.width_px, camera.fx_px)?;
+    write_bev_png(&png, &plotted, Some((camera.width_px, camera.fx_px)), 0)?;
     println!(
         "bird's-eye view: {} (filled discs: truth in cone colour; black crosses: estimates; grey ellipses: 3-sigma)",
         png.display()

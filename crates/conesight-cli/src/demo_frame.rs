@@ -1,7 +1,7 @@
 //! The rendered-frame part of the demo: a synthetic frame from the renderer, the shipped
 //! keypoint network on each cone's labelled box (the detector is not trained yet, so the boxes
 //! are the renderer's), the cone PnP weighted by the network's sigmas, errors against the
-//! renderer's exact positions, and an annotated PNG.
+//! renderer's exact positions, and an annotated PNG (`draw`, as every annotated frame).
 
 use std::path::Path;
 
@@ -14,10 +14,9 @@ use conesight_onnx::ModelOptions;
 use conesight_sim::frames::{FrameParams, random_frame};
 use conesight_sim::labels::{ConeLabel, label_frame};
 use conesight_sim::render::Renderer;
-use image::Rgb;
 use nalgebra::Point3;
 
-use crate::bev::{class_colour, disc, line};
+use crate::draw::{DrawnCone, annotate};
 
 /// Smallest box height handed to the keypoint network, pixels.
 const MIN_BOX_HEIGHT_PX: f64 = 16.0;
@@ -71,22 +70,17 @@ pub fn run(seed: u64, out: &Path) -> anyhow::Result<Vec<f64>> {
         "#", "class", "box_h", "range_m", "est_m", "err_m", "err_%"
     );
     let mut annotated = rendered.image.clone();
+    let mut drawn = Vec::new();
     let mut errors = Vec::new();
     for (index, (cone, prediction)) in cones.iter().zip(&predictions).enumerate() {
-        let colour = class_colour(cone.class);
         let b = &cone.bbox;
-        let corners = [
-            (b.x_min_px, b.y_min_px),
-            (b.x_max_px, b.y_min_px),
-            (b.x_max_px, b.y_max_px),
-            (b.x_min_px, b.y_max_px),
-        ];
-        for i in 0..4 {
-            line(&mut annotated, corners[i], corners[(i + 1) % 4], colour);
-        }
-        for p in &prediction.keypoints_px {
-            disc(&mut annotated, (p.x, p.y), 1.5, Rgb([255, 0, 255]));
-        }
+        let mut shown = DrawnCone {
+            class: cone.class,
+            score: 1.0,
+            box_px: *b,
+            keypoints_px: Some(prediction.keypoints_px),
+            range_m: None,
+        };
         let observation = ConeObservation {
             keypoints_px: prediction.keypoints_px,
             weights: prediction.weights(1.0),
@@ -99,6 +93,7 @@ pub fn run(seed: u64, out: &Path) -> anyhow::Result<Vec<f64>> {
             &pnp,
         ) {
             Ok(estimate) => {
+                shown.range_m = Some(estimate.range_m());
                 let error_m = (estimate.position_in_camera - truth).norm();
                 errors.push(error_m / cone.range_m);
                 println!(
@@ -114,13 +109,15 @@ pub fn run(seed: u64, out: &Path) -> anyhow::Result<Vec<f64>> {
             }
             Err(err) => println!("{index:>3}  {:<12} PnP failed: {err}", cone.class.as_str()),
         }
+        drawn.push(shown);
     }
+    annotate(&mut annotated, &drawn, 1.0)?;
     let png = out.join("frame.png");
     annotated
         .save(&png)
         .with_context(|| format!("cannot write {}", png.display()))?;
     println!(
-        "annotated frame: {} (boxes in cone colour, predicted keypoints magenta)",
+        "annotated frame: {} (boxes in cone colour with class, score and range; predicted keypoints magenta; a crimson cross where the PnP failed)",
         png.display()
     );
     Ok(errors)

@@ -11,9 +11,10 @@ use plotters::prelude::*;
 /// Arguments of `conesight diff`.
 #[derive(Debug, clap::Args)]
 pub struct DiffArgs {
-    /// Recording A (e.g. the old model's run).
+    /// Recording A (e.g. the old model's run); a split recording by its base name.
     a: PathBuf,
-    /// Recording B (e.g. the new model's run of the same drive).
+    /// Recording B (e.g. the new model's run of the same drive); a split recording by its
+    /// base name.
     b: PathBuf,
     /// Folder for the plots (position_change_vs_range.png, count_change_per_frame.png).
     #[arg(long, default_value = "out/diff")]
@@ -40,11 +41,10 @@ pub fn run(args: &DiffArgs) -> anyhow::Result<std::process::ExitCode> {
         gate_fraction: args.gate_fraction,
         ..DiffParams::default()
     };
-    let report = conesight_replay::diff(
-        std::slice::from_ref(&args.a),
-        std::slice::from_ref(&args.b),
-        &params,
-    )?;
+    // A split recording may be named by its base name, as `conesight record --out` was given.
+    let a = conesight_replay::recording_files(std::slice::from_ref(&args.a))?;
+    let b = conesight_replay::recording_files(std::slice::from_ref(&args.b))?;
+    let report = conesight_replay::diff(&a, &b, &params)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
     let scatter = args.out.join("position_change_vs_range.png");

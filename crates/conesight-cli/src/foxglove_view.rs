@@ -1,4 +1,4 @@
-//! `conesight foxglove` (and `conesight run --foxglove ADDR`): a live view for the Foxglove app
+//! `conesight foxglove` (and `conesight run --foxglove-addr ADDR`): a live view for the Foxglove app
 //! through the official SDK's WebSocket server (`foxglove` crate, default
 //! ws://127.0.0.1:8765, Foxglove's own default, so "Open connection" in the app finds it).
 //!
@@ -142,7 +142,7 @@ fn timestamp(ns: u64) -> Timestamp {
 }
 
 fn colour(class: ConeClass, alpha: f64) -> Color {
-    let [r, g, b] = crate::bev::class_colour(class).0;
+    let [r, g, b] = crate::draw::class_colour(class).0;
     Color {
         r: f64::from(r) / 255.0,
         g: f64::from(g) / 255.0,

@@ -223,8 +223,9 @@ fn camera_of(recording: &Path) -> anyhow::Result<String> {
             recording.display()
         ),
         _ => anyhow::bail!(
-            "{} has frames of {} cameras ({}); a job replays one camera per recording: split it \
-             into one recording per camera (conesight record --cameras)",
+            "{} has frames of {} cameras ({}); a job replays one camera per recording: replay \
+             this one with `conesight replay`, which plays every camera, or record each camera's \
+             run in a namespace of its own (conesight run/record --namespace NAME)",
             recording.display(),
             cameras.len(),
             cameras.join(", ")

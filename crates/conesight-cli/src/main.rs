@@ -25,7 +25,10 @@ mod dashboard;
 mod demo;
 mod demo_frame;
 mod diff_cmd;
+mod draw;
 mod echo_cmd;
+#[cfg(test)]
+mod flag_mentions;
 mod foxglove_view;
 mod job_cmd;
 mod keypoints_cmd;
@@ -33,6 +36,8 @@ mod predict;
 mod record_cmd;
 mod replay_cmd;
 mod run;
+mod run_monitor;
+mod run_table;
 mod status_cmd;
 
 use clap::{Parser, Subcommand};

@@ -2,8 +2,10 @@
 //! `--boxes` replaces the detector with given boxes (YOLO txt or KITTI labels); `--detector`
 //! takes conesight's detector or an Ultralytics YOLO export as it comes. Without `--camera`
 //! each image gets a nominal pinhole camera of its own size (ASSUMED_HFOV_DEG), so detections
-//! and keypoints are exact and ranges only as right as that guess.
+//! and keypoints are exact and ranges only as right as that guess. `--save DIR` writes each
+//! image annotated and its cones from above (`draw::save_frame`), every `--save-every`-th.
 
+use std::collections::HashSet;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -15,8 +17,12 @@ use conesight_pipeline::boxes::read_boxes;
 use conesight_pipeline::source::read_image;
 use conesight_pipeline::{FrameResult, InProcessPipeline, PipelineConfig};
 use conesight_proto::confidence_from_weight;
+use image::RgbImage;
 use nalgebra::Matrix3;
 use serde_json::{Value, json};
+
+use crate::bev::BevCone;
+use crate::draw::{DrawnCone, SavedFrame, save_frame};
 
 /// Arguments of `conesight predict`.
 #[derive(Debug, clap::Args)]
@@ -72,6 +78,15 @@ pub struct PredictArgs {
     /// shipped geometry, fitted to real FSOCO cones (models/keypoints.md).
     #[arg(long = "cone-geometry", env = "CONESIGHT_CONE_GEOMETRY")]
     cone_geometry: Option<PathBuf>,
+    /// Write each image annotated (`<stem>.png`: boxes in cone colour with class, score and
+    /// range, keypoints, a cross where the range failed) and its cones from above
+    /// (`<stem>_bev.png`) into this folder.
+    #[arg(long)]
+    save: Option<PathBuf>,
+    /// With `--save`: every N-th image only.
+    #[arg(long = "save-every", default_value_t = 1, requires = "save",
+          value_parser = clap::value_parser!(u64).range(1..))]
+    save_every: u64,
     /// Image files (PNG, JPEG, ...).
     #[arg(required = true)]
     images: Vec<PathBuf>,
@@ -114,17 +129,37 @@ pub fn run(args: &PredictArgs) -> anyhow::Result<()> {
         },
     };
     let mut pipeline = InProcessPipeline::load(&config, &camera, &extrinsics)?;
-    let assumed_camera = args.camera.is_none();
+    let assumed = args.camera.is_none();
     let stdout = std::io::stdout();
     let mut out = stdout.lock();
     let mut failed = 0_usize;
-    for path in &args.images {
-        let line = match predict_one(&mut pipeline, path, args.boxes.as_deref(), assumed_camera) {
-            Ok(result) => json!({
-                "image": path.display().to_string(),
-                "detections": detections_json(&result),
-                "cones": cones_json(&result, args.extrinsics.is_some()),
-            }),
+    let mut saved = Vec::new();
+    let mut stems = HashSet::new();
+    for (index, path) in args.images.iter().enumerate() {
+        let line = match predict_one(&mut pipeline, path, args.boxes.as_deref(), assumed) {
+            Ok((image, result)) => {
+                if let Some(dir) = &args.save
+                    && (index as u64).is_multiple_of(args.save_every)
+                {
+                    let mut stem = path
+                        .file_stem()
+                        .map_or_else(|| "image".into(), |s| s.to_string_lossy().into_owned());
+                    if !stems.insert(stem.clone()) {
+                        stem = format!("{stem}_{index}");
+                    }
+                    let camera = if assumed {
+                        assumed_camera(image.width(), image.height())
+                    } else {
+                        camera
+                    };
+                    saved.push(save_result(dir, &stem, &image, &result, &camera)?);
+                }
+                json!({
+                    "image": path.display().to_string(),
+                    "detections": detections_json(&result),
+                    "cones": cones_json(&result, args.extrinsics.is_some()),
+                })
+            }
             Err(error) => {
                 failed += 1;
                 eprintln!("{}: {error:#}", path.display());
@@ -132,6 +167,16 @@ pub fn run(args: &PredictArgs) -> anyhow::Result<()> {
             }
         };
         writeln!(out, "{line}")?;
+    }
+    if let (Some(dir), Some(first)) = (&args.save, saved.first()) {
+        eprintln!(
+            "saved {} annotated images and bird's-eye views in {}: {} and {}{}",
+            saved.len(),
+            dir.display(),
+            first.frame.display(),
+            first.bev.display(),
+            if saved.len() > 1 { ", ..." } else { "" }
+        );
     }
     anyhow::ensure!(
         failed == 0,
@@ -150,12 +195,52 @@ pub fn assumed_camera(width_px: u32, height_px: u32) -> Camera {
     Camera::pinhole(width_px, height_px, f_px)
 }
 
+/// The image with what was found drawn on it, and its cones from above.
+fn save_result(
+    dir: &Path,
+    stem: &str,
+    image: &RgbImage,
+    result: &FrameResult,
+    camera: &Camera,
+) -> anyhow::Result<SavedFrame> {
+    let mut drawn: Vec<DrawnCone> = result
+        .keypoints
+        .iter()
+        .enumerate()
+        .map(|(index, cone)| {
+            let located = result.cones.iter().find(|(i, _)| *i == index);
+            DrawnCone::keypoints(cone, located.map(|(_, c)| c.estimate.range_m()))
+        })
+        .collect();
+    // Boxes the keypoint stage refused have no cone either.
+    drawn.extend(
+        result
+            .rejected
+            .iter()
+            .filter_map(|(index, _)| result.detections.get(*index))
+            .map(DrawnCone::detection),
+    );
+    let bev: Vec<BevCone> = result
+        .cones
+        .iter()
+        .map(|(_, c)| BevCone::estimate(c))
+        .collect();
+    save_frame(
+        dir,
+        stem,
+        image,
+        &drawn,
+        &bev,
+        Some((camera.width_px, camera.fx_px)),
+    )
+}
+
 fn predict_one(
     pipeline: &mut InProcessPipeline,
     path: &Path,
     boxes: Option<&Path>,
     assumed: bool,
-) -> anyhow::Result<FrameResult> {
+) -> anyhow::Result<(RgbImage, FrameResult)> {
     let image = read_image(path)?;
     if assumed {
         let extrinsics = *pipeline.extrinsics();
@@ -175,7 +260,8 @@ fn predict_one(
             Some(given)
         }
     };
-    Ok(pipeline.process(&image, given.as_deref())?)
+    let result = pipeline.process(&image, given.as_deref())?;
+    Ok((image, result))
 }
 
 fn matrix_json(m: &Matrix3<f64>) -> Value {
@@ -202,7 +288,8 @@ pub fn detections_json(result: &FrameResult) -> Vec<Value> {
         .collect()
 }
 
-/// The JSON cones of a frame: every keypoint set, with its position when the PnP placed it.
+/// The JSON cones of a frame: every keypoint set, with its position when the PnP placed it,
+/// else `null` position, range, covariance and ranging and the reason in `pnp_error`.
 pub fn cones_json(result: &FrameResult, with_vehicle: bool) -> Vec<Value> {
     result
         .keypoints
@@ -229,9 +316,14 @@ pub fn cones_json(result: &FrameResult, with_vehicle: bool) -> Vec<Value> {
                     value["position_vehicle_m"] = json!([v.x, v.y, v.z]);
                 }
             } else {
+                // The same keys as a placed cone's, null, and why.
                 value["position_camera_m"] = Value::Null;
                 value["range_m"] = Value::Null;
                 value["covariance_m2"] = Value::Null;
+                value["ranging"] = Value::Null;
+                if with_vehicle {
+                    value["position_vehicle_m"] = Value::Null;
+                }
                 let reason = result.failed.iter().find(|(i, _)| *i == index).map(|(_, e)| e.clone());
                 value["pnp_error"] = json!(reason);
             }

@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 use anyhow::Context;
 use conesight_bus::{Stream, Topics, ZenohArgs, open_session};
 use conesight_pipeline::Shutdown;
-use conesight_record::{Recorder, RecorderOptions};
+use conesight_record::{Recorder, RecorderOptions, split_path};
 
 /// A stream to record.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -43,7 +43,8 @@ pub struct RecordArgs {
     /// Zenoh session and keys: `--namespace` and `--vehicle` name the run recorded.
     #[command(flatten)]
     zenoh: ZenohArgs,
-    /// The recording (with splitting, `NAME_0000.mcap`, `NAME_0001.mcap`, ...).
+    /// The recording (with splitting, `NAME_0000.mcap`, `NAME_0001.mcap`, ...; `conesight
+    /// replay NAME.mcap` plays them all).
     #[arg(long, short, default_value = "out/recording.mcap")]
     out: PathBuf,
     /// Streams to record, comma separated (default: every stream).
@@ -125,7 +126,7 @@ async fn run_async(args: RecordArgs) -> anyhow::Result<()> {
     eprintln!(
         "recording conesight/{}/** into {} (Ctrl-C stops)",
         topics.namespace(),
-        args.out.display()
+        recording_names(&args.out, args.split_size_mb, args.split_duration_s)
     );
     let started = Instant::now();
     let progress = indicatif::ProgressBar::new_spinner();
@@ -172,6 +173,32 @@ async fn run_async(args: RecordArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The files a recording `--out base` goes into, as the user reads them: `base` itself, or with
+/// splitting its numbered files (`conesight_record::split_path`) and when a new one starts.
+pub(crate) fn recording_names(
+    base: &Path,
+    split_size_mb: Option<u64>,
+    split_duration_s: Option<f64>,
+) -> String {
+    let mut rules = Vec::new();
+    if let Some(mb) = split_size_mb {
+        rules.push(format!("every {mb} MB"));
+    }
+    if let Some(seconds) = split_duration_s {
+        rules.push(format!("every {seconds} s"));
+    }
+    if rules.is_empty() {
+        return base.display().to_string();
+    }
+    format!(
+        "{}, then {}, ... (a new file {}; `conesight replay {}` plays them all)",
+        split_path(base, 0, true).display(),
+        split_path(base, 1, true).display(),
+        rules.join(" or "),
+        base.display()
+    )
+}
+
 /// Each path as the user reads it.
 pub(crate) fn display_paths(paths: &[std::path::PathBuf]) -> Vec<String> {
     paths.iter().map(|p| p.display().to_string()).collect()
@@ -188,6 +215,21 @@ mod tests {
     use super::*;
 
     /// The digest `sha256sum` prints for "abc\n".
+    /// With splitting the names said are the files written (`drive_0000.mcap`, ...), not
+    /// `--out` itself, which is never written then.
+    #[test]
+    fn a_split_recording_is_announced_by_the_names_it_writes() {
+        let base = Path::new("out/drive.mcap");
+        assert_eq!(recording_names(base, None, None), "out/drive.mcap");
+        let split = recording_names(base, Some(2048), None);
+        assert!(
+            split.starts_with("out/drive_0000.mcap, then out/drive_0001.mcap")
+                && split.contains("every 2048 MB"),
+            "{split}"
+        );
+        assert!(recording_names(base, None, Some(60.0)).contains("every 60 s"));
+    }
+
     #[test]
     fn sha256_hex_matches_sha256sum() {
         let path = std::env::temp_dir().join(format!("conesight-sha-{}", std::process::id()));

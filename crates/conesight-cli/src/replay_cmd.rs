@@ -19,7 +19,8 @@ use crate::record_cmd::StreamName;
 /// Arguments of `conesight replay`.
 #[derive(Debug, clap::Args)]
 pub struct ReplayArgs {
-    /// Recordings of `conesight record`, played together in log-time order.
+    /// Recordings of `conesight record`, played together in log-time order; a split
+    /// recording by its files or its base name (`drive.mcap` for `drive_0000.mcap`, ...).
     #[arg(required = true)]
     files: Vec<PathBuf>,
     /// Zenoh session and keys: `--namespace` (and `--vehicle`) name where the frames go,
@@ -78,13 +79,8 @@ async fn run_async(args: ReplayArgs) -> anyhow::Result<()> {
         "replaying into the `live` namespace would mix the recording with the car's own data: \
          pass --namespace NAME (a fresh name per replay), or --into-live if you mean it"
     );
-    for file in &args.files {
-        anyhow::ensure!(
-            file.is_file(),
-            "no recording at {} (give the .mcap files `conesight record` wrote)",
-            file.display()
-        );
-    }
+    // A split recording may be named by its base name, as `conesight record --out` was given.
+    let files = conesight_replay::recording_files(&args.files)?;
     let options = ReplayOptions {
         pacing: if args.as_fast_as_possible {
             Pacing::AsFastAsPossible
@@ -107,7 +103,7 @@ async fn run_async(args: ReplayArgs) -> anyhow::Result<()> {
         topics.namespace()
     );
     let cameras = tokio::select! {
-        result = player.prepare(&args.files) => result?,
+        result = player.prepare(&files) => result?,
         () = shutdown.wait() => anyhow::bail!("interrupted while waiting for the pipeline"),
     };
     // Started after `prepare`: its subscriber would count as the pipeline's.
@@ -128,7 +124,7 @@ async fn run_async(args: ReplayArgs) -> anyhow::Result<()> {
             );
             metadata.insert(
                 "replay_of".into(),
-                args.files
+                files
                     .iter()
                     .map(|p| p.display().to_string())
                     .collect::<Vec<_>>()
@@ -144,14 +140,14 @@ async fn run_async(args: ReplayArgs) -> anyhow::Result<()> {
     };
     eprintln!(
         "replaying {} into conesight/{}/{} (cameras: {})",
-        conesight_replay::describe(&args.files),
+        conesight_replay::describe(&files),
         topics.namespace(),
         topics.vehicle(),
         cameras.join(", ")
     );
     let progress = Arc::new(ReplayProgress::default());
     let bar = spawn_progress(progress.clone(), stop.clone(), shutdown.clone());
-    let summary = player.play(&args.files, progress, stop.clone()).await;
+    let summary = player.play(&files, progress, stop.clone()).await;
     stop.store(true, Ordering::Relaxed);
     let _ = bar.await;
     let mut recorded = Vec::new();

@@ -725,3 +725,53 @@ fn run_on_a_camera_needs_its_calibration() {
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(stderr.contains("--boxes truth needs"), "{stderr}");
 }
+
+/// Issue 39: a script written from README's JSON example crashed on a cone whose ranging
+/// failed (`range_m: null`), which the example did not show. README shows one now, with its
+/// `pnp_error`; and a cone `predict` cannot place (the one cut by the bottom edge of a real
+/// AMZ frame, when `../shared` has it) carries exactly the keys README shows for it.
+#[test]
+fn readme_shows_a_cone_without_a_range_as_predict_prints_it() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let readme = std::fs::read_to_string(root.join("README.md")).unwrap();
+    let example = readme
+        .split("```")
+        .find(|block| block.contains("\"pnp_error\""))
+        .expect("README shows a cone with its pnp_error");
+    for null in [
+        "\"position_camera_m\": null",
+        "\"range_m\": null",
+        "\"covariance_m2\": null",
+        "\"ranging\": null",
+    ] {
+        assert!(
+            example.contains(null),
+            "{null} not in README's example:\n{example}"
+        );
+    }
+    let frame = root.join("../shared/data/real-dev/amz-sequence/amz_289.jpg");
+    if !frame.is_file() {
+        eprintln!("SKIPPED the predict half: no {}", frame.display());
+        return;
+    }
+    let output = conesight(&["predict", frame.to_str().unwrap()]);
+    assert!(output.status.success());
+    let lines = json_lines(&output);
+    let unplaced = lines[0]["cones"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|c| c["range_m"].is_null())
+        .expect("the cone cut by the frame's bottom edge gets no range");
+    assert!(
+        unplaced["pnp_error"]
+            .as_str()
+            .is_some_and(|e| !e.is_empty())
+    );
+    for (key, value) in unplaced.as_object().unwrap() {
+        assert!(
+            example.contains(&format!("\"{key}\":")),
+            "predict prints {key:?} ({value}) for a cone without a range; README does not show it"
+        );
+    }
+}

@@ -125,7 +125,7 @@ impl Drop for Process {
 }
 
 /// `conesight run` of the whole pipeline on a looped 10-frame synthetic drive at 5 Hz until
-/// killed, in a namespace of its own, with `extra` flags (e.g. `--dashboard ADDR`); its out
+/// killed, in a namespace of its own, with `extra` flags (e.g. `--dashboard-addr ADDR`); its out
 /// folder and logs in `dir`. Returns the process, its Zenoh endpoint and its namespace.
 pub fn start_looped_run(dir: &TempDir, name: &str, extra: &[&str]) -> (Process, String, String) {
     let namespace = format!("{name}{}", std::process::id());

@@ -1,8 +1,9 @@
-//! The web dashboard in a real headless Chromium: `conesight run --dashboard` (the four
+//! The web dashboard in a real headless Chromium: `conesight run --dashboard-addr` (the four
 //! services and the page in one process), Chromium opened on the page and driven over the
 //! DevTools protocol. Two screenshots 1 s apart: the cone map is not empty in either and it
-//! changed; the DOM lists cones, a new frame sequence and the four services. The screenshots
-//! are saved under `target/artefacts/`.
+//! changed; the DOM lists cones, a new frame sequence and the four services. And `conesight
+//! dashboard` fed cones by the test: the map reaches the farthest one. The screenshots are
+//! saved under `target/artefacts/`.
 #![allow(clippy::unwrap_used, clippy::expect_used, missing_docs)]
 
 mod common_process;
@@ -103,34 +104,20 @@ fn cone_pixels(map: &image::RgbImage) -> usize {
         .count()
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn dashboard_in_chromium_shows_cones_that_move() {
-    let chromium = ["chromium", "chromium-browser", "google-chrome"]
+/// Chromium, if installed.
+fn chromium() -> Option<&'static str> {
+    let found = ["chromium", "chromium-browser", "google-chrome"]
         .into_iter()
         .find(|c| Command::new(c).arg("--version").output().is_ok());
-    let Some(chromium) = chromium else {
+    if found.is_none() {
         eprintln!("SKIPPED: no chromium (scripts/setup.sh installs Debian's `chromium`)");
-        return;
-    };
-    let dir = TempDir::new("dashboard");
-    let port = free_port();
-    let addr = format!("127.0.0.1:{port}");
-    let (_run, _, _) = common_process::start_looped_run(&dir, "dashboard", &["--dashboard", &addr]);
-    let started = Instant::now();
-    loop {
-        let cones = http_get(port, "/api/state")
-            .and_then(|body| serde_json::from_str::<Value>(&body).ok())
-            .map_or(0, |state| state["cones"].as_array().map_or(0, Vec::len));
-        if cones > 0 {
-            break;
-        }
-        assert!(
-            started.elapsed() < Duration::from_secs(180),
-            "no cones on /api/state"
-        );
-        std::thread::sleep(Duration::from_millis(500));
     }
+    found
+}
 
+/// Headless `chromium` on `http://addr/`, its profile in `dir`; the browser (killed on drop
+/// by the caller) and the DevTools socket of the page.
+async fn open_page(chromium: &str, addr: &str, dir: &TempDir) -> (std::process::Child, Socket) {
     let profile = dir.join("chromium-profile");
     let mut browser = Command::new(chromium)
         .args([
@@ -175,9 +162,52 @@ async fn dashboard_in_chromium_shows_cones_that_move() {
         .as_str()
         .unwrap()
         .replace("ws://localhost:", "ws://127.0.0.1:");
-    let (mut socket, _) = tokio_tungstenite::connect_async(url.as_str())
+    let (socket, _) = tokio_tungstenite::connect_async(url.as_str())
         .await
         .unwrap_or_else(|error| panic!("{url}: {error}"));
+    (browser, socket)
+}
+
+/// Takes a screenshot: the PNG bytes.
+async fn screenshot(socket: &mut Socket, id: u64) -> Vec<u8> {
+    let result = call(
+        socket,
+        id,
+        "Page.captureScreenshot",
+        json!({ "format": "png" }),
+    )
+    .await;
+    base64::engine::general_purpose::STANDARD
+        .decode(result["data"].as_str().unwrap())
+        .unwrap()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn dashboard_in_chromium_shows_cones_that_move() {
+    let Some(chromium) = chromium() else {
+        return;
+    };
+    let dir = TempDir::new("dashboard");
+    let port = free_port();
+    let addr = format!("127.0.0.1:{port}");
+    let (_run, _, _) =
+        common_process::start_looped_run(&dir, "dashboard", &["--dashboard-addr", &addr]);
+    let started = Instant::now();
+    loop {
+        let cones = http_get(port, "/api/state")
+            .and_then(|body| serde_json::from_str::<Value>(&body).ok())
+            .map_or(0, |state| state["cones"].as_array().map_or(0, Vec::len));
+        if cones > 0 {
+            break;
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(180),
+            "no cones on /api/state"
+        );
+        std::thread::sleep(Duration::from_millis(500));
+    }
+
+    let (mut browser, mut socket) = open_page(chromium, &addr, &dir).await;
 
     let state = r#"JSON.stringify({
         count: Number(document.getElementById("cone-count").textContent),
@@ -287,4 +317,161 @@ async fn dashboard_in_chromium_shows_cones_that_move() {
         changed > 50,
         "the map did not change in 1 s ({changed} pixels)"
     );
+}
+
+/// A cone of `class` at (`x_m` ahead, `y_m` left) in the vehicle frame of the paper's mounting
+/// (1 m high, level), as the localiser publishes it.
+fn cone_at(class: conesight_core::ConeClass, x_m: f64, y_m: f64) -> conesight_proto::LocatedCone {
+    use nalgebra::{Matrix3, Point3, Vector3};
+    let estimate = conesight_core::pnp::ConeEstimate {
+        position_in_camera: Point3::new(-y_m, 1.0, x_m),
+        covariance_m2: Matrix3::from_diagonal(&Vector3::new(0.01, 0.01, 0.04)),
+        axis_in_camera: Vector3::new(0.0, -1.0, 0.0),
+        tilt_rad: 0.0,
+        reprojection_rms_px: 0.5,
+        inliers: [true; 7],
+        iterations: 5,
+    };
+    let detection = conesight_proto::ConeDetection {
+        class,
+        score: 0.9,
+        box_px: conesight_vision::PixelBox {
+            x_min_px: 100.0,
+            y_min_px: 100.0,
+            x_max_px: 110.0,
+            y_max_px: 115.0,
+        },
+    };
+    conesight_proto::LocatedCone::new(
+        detection,
+        estimate,
+        &conesight_core::Extrinsics::paper_default(),
+    )
+}
+
+/// Issue 39: the map stopped at 40 m, so a cone at 70 m (a wrong mount gave ranges up to
+/// 72 m on real frames) was drawn off the canvas. `conesight dashboard` is fed a cone at 8 m
+/// and one at 70 m on the bus; the map's reach grows past 70 m and the far cone is drawn
+/// inside it, in its colour.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_dashboard_map_follows_the_farthest_cone() {
+    use conesight_bus::{Stream, Topics, ZenohArgs, encode, open_session};
+    let Some(chromium) = chromium() else {
+        return;
+    };
+    let dir = TempDir::new("dashboard-far");
+    let namespace = format!("far{}", std::process::id());
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let port = free_port();
+    let addr = format!("127.0.0.1:{port}");
+    let _dashboard = common_process::Process::start(
+        "dashboard",
+        &[
+            "dashboard",
+            "--namespace",
+            &namespace,
+            "--zenoh-listen",
+            &endpoint,
+            "--dashboard-addr",
+            &addr,
+        ],
+        &dir.join("dashboard.log"),
+    );
+    let args = ZenohArgs {
+        connect: vec![endpoint],
+        listen: vec!["tcp/127.0.0.1:0".to_owned()],
+        namespace,
+        ..ZenohArgs::default()
+    };
+    let session = open_session(&args).await.unwrap();
+    let topics = Topics::from_args(&args).unwrap();
+    let key = topics.key("front", Stream::Cones).unwrap();
+    let cones = [
+        cone_at(conesight_core::ConeClass::Blue, 8.0, 2.0),
+        cone_at(conesight_core::ConeClass::Yellow, 70.0, -6.0),
+    ];
+    let publisher = tokio::spawn({
+        let session = session.clone();
+        async move {
+            for sequence in 0.. {
+                let header = conesight_proto::pb::Header::new(
+                    "front",
+                    sequence,
+                    conesight_proto::now_ns(),
+                    "front_optical",
+                );
+                let message = conesight_proto::pb::Cones::new_stamped(header, &cones);
+                let _ = session.put(key.clone(), encode(&message)).await;
+                tokio::time::sleep(Duration::from_millis(200)).await;
+            }
+        }
+    });
+    let started = Instant::now();
+    while http_get(port, "/api/state")
+        .and_then(|body| serde_json::from_str::<Value>(&body).ok())
+        .is_none_or(|state| state["cones"].as_array().map_or(0, Vec::len) < 2)
+    {
+        assert!(
+            started.elapsed() < Duration::from_secs(60),
+            "no cones on /api/state"
+        );
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    }
+
+    let (mut browser, mut socket) = open_page(chromium, &addr, &dir).await;
+    // The far cone's place on the canvas, by the page's own transform.
+    let where_far = r#"JSON.stringify((() => {
+        const r = document.getElementById("map").getBoundingClientRect();
+        return { count: Number(document.getElementById("cone-count").textContent),
+                 reach: Number(document.getElementById("map").dataset.xMaxM),
+                 at: [r.x + px(-6), r.y + py(70)].map(Math.round),
+                 map: [r.x, r.y, r.width, r.height].map(Math.round) }; })())"#;
+    let mut id = 0;
+    let seen = loop {
+        id += 1;
+        let seen: Value = eval(&mut socket, id, where_far)
+            .await
+            .as_str()
+            .and_then(|text| serde_json::from_str(text).ok())
+            .unwrap_or(Value::Null);
+        if seen["count"] == 2 {
+            break seen;
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(90),
+            "the page never showed the 2 cones: {seen}"
+        );
+        tokio::time::sleep(Duration::from_millis(250)).await;
+    };
+    id += 1;
+    let png = screenshot(&mut socket, id).await;
+    let _ = browser.kill();
+    let _ = browser.wait();
+    publisher.abort();
+    let artefacts = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .parent()
+        .unwrap()
+        .join("artefacts");
+    std::fs::create_dir_all(&artefacts).unwrap();
+    std::fs::write(artefacts.join("dashboard-far.png"), &png).unwrap();
+    eprintln!("dashboard map: {seen}");
+
+    let reach = seen["reach"].as_f64().unwrap_or(0.0);
+    assert!(reach > 70.0, "the map reaches {reach} m: {seen}");
+    let value = |v: &Value, i: usize| v[i].as_i64().unwrap();
+    let (x, y) = (value(&seen["at"], 0), value(&seen["at"], 1));
+    let map = &seen["map"];
+    assert!(
+        x > value(map, 0)
+            && x < value(map, 0) + value(map, 2)
+            && y > value(map, 1)
+            && y < value(map, 1) + value(map, 3),
+        "the cone at 70 m is off the map: {seen}"
+    );
+    let around = crop(&png, [(x - 4) as u32, (y - 4) as u32, 9, 9]);
+    assert!(
+        cone_pixels(&around) > 10,
+        "no cone drawn where the cone at 70 m belongs: {seen}"
+    );
+    session.close().await.unwrap();
 }

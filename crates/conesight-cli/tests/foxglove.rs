@@ -1,5 +1,6 @@
-//! The Foxglove live view: `conesight run --foxglove ADDR` (the four services and the view in
-//! one process), a WebSocket client speaking the Foxglove WebSocket protocol (subprotocol `foxglove.sdk.v1`, the SDK's):
+//! The Foxglove live view: `conesight run --foxglove ADDR` (the old name of `--foxglove-addr`,
+//! which still works; the four services and the view in one process), a WebSocket client
+//! speaking the Foxglove WebSocket protocol (subprotocol `foxglove.sdk.v1`, the SDK's):
 //! the image, scene, calibration, transform and cones channels are advertised, and at least 10
 //! messages of each of image, scene and cones arrive and decode (JPEG, `foxglove.SceneUpdate`
 //! with a cone per located cone, `conesight.v1.Cones`).

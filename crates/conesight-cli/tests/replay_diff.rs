@@ -1,7 +1,8 @@
 //! Record, replay twice, diff: the real pieces as processes on loopback Zenoh.
 //!
 //! `conesight run --services camera` publishes a 200-frame synthetic drive that `conesight
-//! record` writes (frames as JPEG); the recording is replayed `--as-fast-as-possible` through
+//! record` writes (frames as JPEG) split as the guide splits it (`drive_0000.mcap`, named so
+//! by the recorder); the recording is replayed by its base name `--as-fast-as-possible` through
 //! the real detector, keypoints and localiser (`conesight run --services
 //! detector,keypoints,localiser`, a fresh namespace each time), twice, each replay recording
 //! its cones (`--record`). Both replays answer every frame, no service drops a frame
@@ -58,6 +59,10 @@ fn record_drive(dir: &TempDir) -> PathBuf {
             drive.to_str().unwrap(),
             "--queue-len",
             "64",
+            // As docs/on-your-car.md records: the files are drive_0000.mcap, ... and the
+            // replay below is given the base name.
+            "--split-size-mb",
+            "2048",
         ],
         &dir.join("recorder.log"),
     );
@@ -102,6 +107,16 @@ fn record_drive(dir: &TempDir) -> PathBuf {
         recorder.interrupt(Duration::from_secs(30)).success(),
         "{}",
         recorder.log_text()
+    );
+    // The recorder names the file it wrote, at the start and at the end (it said "into
+    // drive.mcap" and wrote drive_0000.mcap).
+    let first = dir.join("drive_0000.mcap");
+    assert!(first.is_file() && !drive.exists());
+    let said = recorder.log_text();
+    let first_name = first.display().to_string();
+    assert!(
+        said.contains(&format!("into {first_name}")) && recorder.stdout().contains(&first_name),
+        "{said}"
     );
     drive
 }
@@ -253,7 +268,8 @@ fn a_recorded_drive_replays_to_identical_cones_and_diff_sees_a_change() {
     let started = Instant::now();
     let dir = TempDir::new("replay-diff");
     let drive = record_drive(&dir);
-    let mut recording = Recording::open(std::slice::from_ref(&drive)).unwrap();
+    let files = conesight_replay::recording_files(std::slice::from_ref(&drive)).unwrap();
+    let mut recording = Recording::open(&files).unwrap();
     let mut frames = Vec::new();
     while let Some(message) = recording.next_message().unwrap() {
         if message.stream == Stream::Frame {

@@ -105,10 +105,13 @@ pub enum GeometryError {
         /// The valid range.
         expected: &'static str,
     },
-    /// RANSAC found no pose supported by enough inliers.
+    /// No pose is supported by enough inliers (RANSAC, or the cone solver's outlier search).
+    /// The message names no setting: no command has one for it, and the usual cause is the
+    /// input (a cone cut by the frame's edge or hidden, a box that is not a cone).
     #[error(
-        "no consensus: best pose has {inliers} inliers, need {needed}; \
-         raise the inlier threshold or check the correspondences"
+        "no consensus: the best pose fits {inliers} of the points, {needed} needed (the points \
+         do not fit one pose: a cone cut by the frame's edge or hidden, or a wrong box or \
+         correspondence)"
     )]
     NoConsensus {
         /// Inliers of the best hypothesis.

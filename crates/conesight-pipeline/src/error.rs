@@ -65,7 +65,8 @@ pub enum PipelineError {
     /// An image does not match the camera calibration.
     #[error(
         "image is {width_px}x{height_px} px but the camera calibration is for \
-         {camera_width_px}x{camera_height_px}; pass the calibration of the camera that took it"
+         {camera_width_px}x{camera_height_px}; pass the calibration of the camera that took it \
+         (one made at {width_px}x{height_px})"
     )]
     CalibrationSize {
         /// Image width.

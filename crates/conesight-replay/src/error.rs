@@ -14,6 +14,18 @@ pub enum ReplayError {
         /// The cause.
         source: std::io::Error,
     },
+    /// Neither a recording nor the first file of a split one is there.
+    #[error(
+        "no recording at {path}: looked for {path} and {first_split} (the first file of a \
+         recording `conesight record` split with --split-size-mb or --split-duration-s); give \
+         the .mcap files `conesight record` wrote, or their base name"
+    )]
+    NoRecording {
+        /// The name given.
+        path: PathBuf,
+        /// The first file of a split recording of that name.
+        first_split: PathBuf,
+    },
     /// The file does not start with the MCAP magic.
     #[error(
         "{path} is not an MCAP file (it does not start with the MCAP magic); replay and diff read \

@@ -9,6 +9,8 @@
 //!   [`Recording`] merges several files in log-time order. Clear errors for a missing file,
 //!   a file that is not MCAP, a channel whose schema is not a conesight message, an
 //!   undecodable message ([`ReplayError`]).
+//! - `files`: [`recording_files`], the files of the recordings named (a split recording by
+//!   its base name: `drive.mcap` for `drive_0000.mcap`, `drive_0001.mcap`, ...).
 //! - `player`: [`Player`], the recorded frames and camera info published into a chosen
 //!   namespace, at the recorded timing scaled by a rate or as fast as the pipeline answers
 //!   (one frame at a time, paced on its cones, so no frame is replaced in a service's slot).
@@ -23,6 +25,7 @@
 
 mod diff;
 mod error;
+mod files;
 pub mod job;
 mod player;
 mod reader;
@@ -32,6 +35,7 @@ pub use diff::{
     compare, describe, diff, match_frame, percentile, read_cones,
 };
 pub use error::ReplayError;
+pub use files::recording_files;
 pub use job::{
     JobSummary, ModelDigest, ResultPaths, Shard, compare_folders, list_recordings, read_summaries,
     totals, write_atomic,

@@ -25,15 +25,19 @@ pub enum SourceError {
         /// The source.
         spec: String,
     },
-    /// A frame's size differs from the calibration's.
+    /// A frame's size differs from the calibration's. The wording is `conesight predict`'s
+    /// (`PipelineError::CalibrationSize`): both sizes, then the fix.
     #[error(
-        "frame of {width_px}x{height_px} px from {source_name} does not match the calibration's \
-         {expected_width_px}x{expected_height_px} px (--camera-info): calibrate this mode, or make \
-         the pipeline deliver {expected_width_px}x{expected_height_px}"
+        "{frame} from {source_name} is {width_px}x{height_px} px but the camera calibration \
+         (--camera-info) is for {expected_width_px}x{expected_height_px}; pass the calibration of \
+         the camera that took it (one made at {width_px}x{height_px}), or make the source deliver \
+         {expected_width_px}x{expected_height_px}"
     )]
     SizeMismatch {
         /// The source, for the message.
         source_name: String,
+        /// The frame (an image file's path, or `frame N` of a camera).
+        frame: String,
         /// The frame's width.
         width_px: u32,
         /// The frame's height.

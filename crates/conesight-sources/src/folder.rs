@@ -1,5 +1,5 @@
-//! [`FolderFrames`]: the images of a folder in name order, looped, decoded when due and kept
-//! within a memory budget.
+//! [`FolderFrames`]: the images of a folder in name order, once (or looped), decoded when due
+//! and kept within a memory budget.
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -12,7 +12,8 @@ use conesight_pipeline::source::{list_images, read_image};
 
 use crate::{Calibration, CameraFrame, FrameSource, Next, Pacing, SourceError};
 
-/// The images of a folder, in name order, looped. Listed at start; each image is decoded when
+/// The images of a folder, in name order, once: after the last one the source is finished
+/// (`Next::Finished`), or with `looped` it starts again. Listed at start; each image is decoded when
 /// it is first due (the one after it is decoded ahead on a thread meanwhile) and kept for the
 /// next loops while the decoded frames fit in the cache budget, so the first frame goes out
 /// after one decode and a folder of any size runs in bounded memory. An unreadable image (or
@@ -30,8 +31,12 @@ pub struct FolderFrames {
     unreadable: Vec<bool>,
     /// The image being decoded ahead: (index, thread).
     ahead: Option<(usize, JoinHandle<Result<CameraFrame, SourceError>>)>,
-    /// The next image to give.
+    /// Images given so far, in all loops (the next one is `cursor % len`).
     cursor: usize,
+    /// Start again after the last image.
+    looped: bool,
+    /// Images given.
+    given: u64,
 }
 
 /// Decodes image `index` of a folder (and its labels when `labels` is set).
@@ -67,14 +72,33 @@ fn read_folder_frame(
 impl FolderFrames {
     /// The images of `dir` (at least one file with an image extension), decoded later; the
     /// label files of `labels` give each image's boxes; decoded frames are kept within
-    /// `cache_mb` MiB.
+    /// `cache_mb` MiB (for the next loops when `looped`). The first image's size (its header alone is read) must be the
+    /// calibration's, so a calibration of another camera or mode is refused before anything
+    /// starts.
     pub fn new(
         dir: &Path,
         calibration: Calibration,
         labels: Option<PathBuf>,
         cache_mb: usize,
+        looped: bool,
     ) -> Result<Self, SourceError> {
         let paths = list_images(dir)?;
+        let camera = &calibration.camera;
+        // An unreadable first image is skipped when it is due, as any other.
+        if let Some((path, Ok((width_px, height_px)))) = paths
+            .first()
+            .map(|path| (path, image::image_dimensions(path)))
+            && (width_px, height_px) != (camera.width_px, camera.height_px)
+        {
+            return Err(SourceError::SizeMismatch {
+                source_name: format!("folder:{}", dir.display()),
+                frame: path.display().to_string(),
+                width_px,
+                height_px,
+                expected_width_px: camera.width_px,
+                expected_height_px: camera.height_px,
+            });
+        }
         Ok(Self {
             dir: dir.to_path_buf(),
             cache: vec![None; paths.len()],
@@ -86,6 +110,8 @@ impl FolderFrames {
             cached_bytes: 0,
             ahead: None,
             cursor: 0,
+            looped,
+            given: 0,
         })
     }
 
@@ -131,12 +157,19 @@ impl FolderFrames {
         }
     }
 
-    /// The next readable image from the cursor on.
-    fn next_readable(&mut self) -> Result<CameraFrame, SourceError> {
+    /// The next readable image from the cursor on; `None` at the end of an unlooped folder.
+    fn next_readable(&mut self) -> Result<Option<CameraFrame>, SourceError> {
         let count = self.paths.len();
         for _ in 0..count {
+            if !self.looped && self.cursor >= count {
+                break;
+            }
             let index = self.cursor % count;
-            self.cursor = (index + 1) % count;
+            self.cursor = if self.looped {
+                index + 1
+            } else {
+                self.cursor + 1
+            };
             if self.unreadable[index] {
                 continue;
             }
@@ -145,7 +178,7 @@ impl FolderFrames {
                 None => match self.decode(index) {
                     Ok(frame) => {
                         let bytes = frame.frame.image.as_raw().len();
-                        if self.cached_bytes + bytes <= self.budget_bytes {
+                        if self.looped && self.cached_bytes + bytes <= self.budget_bytes {
                             self.cached_bytes += bytes;
                             self.cache[index] = Some(frame.clone());
                         }
@@ -158,12 +191,20 @@ impl FolderFrames {
                     }
                 },
             };
-            // Decode the next image meanwhile, unless it is cached or known unreadable.
-            let next = (index + 1) % count;
-            if self.cache[next].is_none() && !self.unreadable[next] && self.ahead.is_none() {
-                self.ahead = Some((next, self.decode_ahead(next)));
+            // Decode the next image meanwhile, unless it is cached, known unreadable or past
+            // the end of an unlooped folder.
+            let next = index + 1;
+            if self.looped || next < count {
+                let next = next % count;
+                if self.cache[next].is_none() && !self.unreadable[next] && self.ahead.is_none() {
+                    self.ahead = Some((next, self.decode_ahead(next)));
+                }
             }
-            return Ok(frame);
+            self.given += 1;
+            return Ok(Some(frame));
+        }
+        if !self.looped && self.cursor >= count && self.given > 0 {
+            return Ok(None);
         }
         Err(SourceError::Failed {
             source_name: self.name(),
@@ -186,12 +227,14 @@ impl FrameSource for FolderFrames {
     }
 
     fn next_frame(&mut self, _timeout: Duration) -> Result<Next, SourceError> {
-        self.next_readable()
-            .map(|frame| Next::Frame(Box::new(frame)))
+        Ok(match self.next_readable()? {
+            Some(frame) => Next::Frame(Box::new(frame)),
+            None => Next::Finished,
+        })
     }
 
     fn repeats_frames(&self) -> bool {
-        true
+        self.looped
     }
 }
 
@@ -215,12 +258,12 @@ mod tests {
         dir
     }
 
-    fn open(dir: &Path, cache_mb: usize) -> FolderFrames {
+    fn open(dir: &Path, cache_mb: usize, looped: bool) -> FolderFrames {
         let calibration = Calibration {
-            camera: Camera::paper_default(),
+            camera: Camera::pinhole(8, 6, 10.0),
             extrinsics: Extrinsics::paper_default(),
         };
-        FolderFrames::new(dir, calibration, None, cache_mb).unwrap()
+        FolderFrames::new(dir, calibration, None, cache_mb, looped).unwrap()
     }
 
     fn next(frames: &mut FolderFrames) -> Result<CameraFrame, SourceError> {
@@ -233,7 +276,7 @@ mod tests {
     #[test]
     fn folder_frames_loop_skip_unreadable_files_and_cache_within_budget() {
         let dir = folder("loop", 3);
-        let mut frames = open(&dir, 1);
+        let mut frames = open(&dir, 1, true);
         assert_eq!(frames.len(), 4);
         assert_eq!(frames.cached(), 0, "nothing is decoded up front");
         let mut seen = Vec::new();
@@ -251,7 +294,7 @@ mod tests {
         assert!(frames.repeats_frames());
 
         // A budget of 0 keeps nothing: every loop decodes again (memory stays bounded).
-        let mut uncached = open(&dir, 0);
+        let mut uncached = open(&dir, 0, true);
         for _ in 0..6 {
             assert!(next(&mut uncached).is_ok());
         }
@@ -259,18 +302,66 @@ mod tests {
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
+    /// Without `looped` the folder is given once, then the source is finished (it used to loop
+    /// for ever, so `run` on a team's folder never ended); nothing is kept for a next loop.
+    #[test]
+    fn an_unlooped_folder_is_finished_after_its_last_image() {
+        let dir = folder("once", 3);
+        let mut frames = open(&dir, 1, false);
+        let seen: Vec<u64> = (0..3)
+            .map(|_| next(&mut frames).unwrap().frame.index)
+            .collect();
+        assert_eq!(seen, vec![0, 1, 2]);
+        for _ in 0..2 {
+            assert!(matches!(
+                frames.next_frame(Duration::ZERO).unwrap(),
+                Next::Finished
+            ));
+        }
+        assert_eq!(frames.cached(), 0);
+        assert!(!frames.repeats_frames());
+        // A folder of unreadable files alone is still an error, not an end.
+        let bad = folder("once-bad", 0);
+        let mut frames = open(&bad, 1, false);
+        assert!(frames.next_frame(Duration::ZERO).is_err());
+        std::fs::remove_dir_all(&dir).unwrap();
+        std::fs::remove_dir_all(&bad).unwrap();
+    }
+
+    /// A calibration of another size is refused when the folder is opened, naming the image,
+    /// both sizes and the fix (it used to be found frame by frame, and retried for ever).
+    #[test]
+    fn a_folder_of_another_size_than_the_calibration_is_refused_at_open() {
+        let dir = folder("size", 1);
+        let calibration = Calibration {
+            camera: Camera::pinhole(16, 12, 20.0),
+            extrinsics: Extrinsics::paper_default(),
+        };
+        let error = FolderFrames::new(&dir, calibration, None, 1, false)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            error.contains("0.png")
+                && error.contains("8x6 px")
+                && error.contains("16x12")
+                && error.contains("pass the calibration of the camera that took it"),
+            "{error}"
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
     #[test]
     fn empty_or_unreadable_folders_are_clear_errors() {
         let dir = folder("bad", 0);
-        let mut frames = open(&dir, 1);
+        let mut frames = open(&dir, 1, true);
         let error = next(&mut frames).unwrap_err().to_string();
         assert!(error.contains("no readable image"), "{error}");
         std::fs::remove_file(dir.join("0.png")).unwrap();
         let calibration = Calibration {
-            camera: Camera::paper_default(),
+            camera: Camera::pinhole(8, 6, 10.0),
             extrinsics: Extrinsics::paper_default(),
         };
-        let error = FolderFrames::new(&dir, calibration, None, 1)
+        let error = FolderFrames::new(&dir, calibration, None, 1, false)
             .unwrap_err()
             .to_string();
         assert!(error.contains("no image files"), "{error}");

@@ -284,6 +284,10 @@ impl FrameSource for GstSource {
         Pacing::Source
     }
 
+    fn is_live(&self) -> bool {
+        matches!(self.input, Input::Pipeline(_))
+    }
+
     fn start(&mut self) -> Result<(), SourceError> {
         self.running = None;
         let running = self.parse()?;

@@ -9,8 +9,8 @@
 //!   gst:PIPELINE` grammar.
 //! - [`synthetic`]: [`SyntheticFrames`], the renderer driving a track (preloaded and looped,
 //!   or rendered live), with exact truth.
-//! - [`folder`]: [`FolderFrames`], image files in name order, looped, decoded when due and
-//!   cached within a budget.
+//! - [`folder`]: [`FolderFrames`], image files in name order, once or looped, decoded when
+//!   due and cached within a budget.
 //! - [`gst`]: [`GstSource`], a GStreamer pipeline ending in an appsink forced to RGB (V4L2,
 //!   GigE and USB3 cameras through their plugins, RTSP, a Jetson's CSI camera) or a video file
 //!   (`filesrc ! decodebin`); frames stamped with the buffer's time.
@@ -80,7 +80,8 @@ pub enum Next {
     Frame(Box<CameraFrame>),
     /// No frame within the timeout (ask again).
     Pending,
-    /// The source is over for good (a video file played to its end without `--source-loop`).
+    /// The source is over for good (a video file or an image folder at its end without
+    /// `--source-loop`).
     Finished,
 }
 
@@ -109,6 +110,14 @@ pub trait FrameSource: Send {
         false
     }
 
+    /// True for a live camera: a frame of another size than the calibration's may be a mode
+    /// it came up in, so the camera service reports it and starts the source again. For
+    /// files (an image folder, a video file, rendered frames) it is final: the camera stops
+    /// with the error.
+    fn is_live(&self) -> bool {
+        false
+    }
+
     /// Every frame the source will give, when known up front (a preloaded synthetic
     /// sequence): for consumers that judge the pipeline against the truth.
     fn known_frames(&self) -> Option<Arc<Vec<CameraFrame>>> {
@@ -123,8 +132,15 @@ pub fn check_size(source_name: &str, frame: &SourceFrame) -> Result<(), SourceEr
     if (width_px, height_px) == (camera.width_px, camera.height_px) {
         return Ok(());
     }
+    // An image file is named by its path; a camera's frame by its index.
+    let frame_name = if frame.name.starts_with(source_name) {
+        format!("frame {}", frame.index)
+    } else {
+        frame.name.clone()
+    };
     Err(SourceError::SizeMismatch {
         source_name: source_name.to_owned(),
+        frame: frame_name,
         width_px,
         height_px,
         expected_width_px: camera.width_px,
@@ -147,7 +163,8 @@ pub struct OpenParams {
     pub labels: Option<std::path::PathBuf>,
     /// Decoded folder images kept within this many MiB.
     pub cache_mb: usize,
-    /// A video file starts again at its end.
+    /// A video file or an image folder starts again at its end (else the source is finished
+    /// there).
     pub looped: bool,
 }
 
@@ -178,6 +195,7 @@ pub fn open(spec: &SourceSpec, params: &OpenParams) -> Result<Box<dyn FrameSourc
                 calibration()?,
                 params.labels.clone(),
                 params.cache_mb,
+                params.looped,
             )?)
         }
         SourceSpec::Video(path) => Box::new(GstSource::video(path, calibration()?, params.looped)?),

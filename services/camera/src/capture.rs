@@ -16,7 +16,10 @@ use crate::{CAMERA_INFO_PERIOD, CameraArgs};
 const POLL_TIMEOUT: Duration = Duration::from_millis(100);
 
 /// Publishes frames from `source` until `args.frames` are out, the source is finished (a
-/// video file at its end without `--source-loop`) or `shutdown`.
+/// video file or an image folder at its end without `--source-loop`) or `shutdown`. A frame
+/// of another size than the calibration's is an error that ends the loop, unless the source
+/// is a live camera (`FrameSource::is_live`) and `args.stop_on_size_mismatch` is off: then it
+/// is reported and the camera started again, as for any camera failure.
 pub async fn run(
     args: &CameraArgs,
     mut source: Box<dyn FrameSource>,
@@ -117,6 +120,17 @@ pub async fn run(
                     break;
                 }
                 Err(error) => {
+                    if matches!(error, SourceError::SizeMismatch { .. })
+                        && (args.stop_on_size_mismatch || !source.is_live())
+                    {
+                        // Starting the source again would give the same frames: stop.
+                        node.errors.report(error.kind(), &error);
+                        node.readiness.set_source_up(false);
+                        node.readiness
+                            .set_detail("source", format!("stopped: {error}"));
+                        tokio::task::block_in_place(|| source.stop());
+                        return Err(error.into());
+                    }
                     if !health.down(&mut *source, &error, &shutdown).await {
                         break;
                     }

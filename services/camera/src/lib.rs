@@ -6,17 +6,20 @@
 //!
 //! - `synthetic`: the renderer driving a track (frames rendered up front with `--preload`, or
 //!   live), with exact truth;
-//! - `folder:DIR` (or `folder` with `--images DIR`): image files in name order, looped,
-//!   decoded when due and cached up to `--cache-mb`;
+//! - `folder:DIR` (or `folder` with `--images DIR`): image files in name order, decoded when
+//!   due; at the last one the service stops, or with `--source-loop` starts again (decoded
+//!   images cached up to `--cache-mb` for the next loops);
 //! - `video:PATH`: a video file, played at its own rate; at its end the service stops, or
 //!   with `--source-loop` plays it again;
 //! - `gst:PIPELINE`: a GStreamer pipeline (a V4L2, GigE, USB3 or CSI camera, RTSP, ...).
 //!
 //! Every source but `synthetic` needs `--camera-info FILE`, and a frame whose size differs
-//! from it is an error naming both sizes. Synthetic and folder frames go out at `--rate-hz`
-//! or, with `--rate-hz 0`, as fast as the pipeline takes them (the next frame when the cones
-//! of the previous one arrive, or after `--pace-timeout-ms`); GStreamer sources at their own
-//! rate, stamped with the buffer's time (`capture`).
+//! from it is an error naming both sizes: the service stops with it for an image folder (its
+//! first image is checked before anything starts) or a video file; a live camera is reported
+//! and started again (it may have come up in another mode). Synthetic and folder frames go
+//! out at `--rate-hz` or, with `--rate-hz 0`, as fast as the pipeline takes them (the next
+//! frame when the cones of the previous one arrive, or after `--pace-timeout-ms`); GStreamer
+//! sources at their own rate, stamped with the buffer's time (`capture`).
 //!
 //! A source that fails, ends or stalls (no frame for `--source-timeout-ms`) is reported
 //! (`conesight_errors_total{kind="source_failed"|"source_ended"|"source_stalled"|...}`, one
@@ -88,7 +91,8 @@ pub struct CameraArgs {
     /// Extrinsics YAML (`vehicle_from_camera`; default: the paper's mounting, 1 m high, level).
     #[arg(long, env = "CONESIGHT_EXTRINSICS")]
     pub extrinsics: Option<PathBuf>,
-    /// With `--source video:PATH`: play the file again at its end (else the service stops).
+    /// With `--source video:PATH` or `folder:DIR`: start again at the end of the file or
+    /// folder (else the service stops there).
     #[arg(long = "source-loop", env = "CONESIGHT_SOURCE_LOOP")]
     pub source_loop: bool,
     /// A GStreamer source that gives no frame for this long is reported and restarted.
@@ -110,9 +114,9 @@ pub struct CameraArgs {
     /// frame); 0 renders every frame live.
     #[arg(long, env = "CONESIGHT_PRELOAD", default_value_t = 20)]
     pub preload: u64,
-    /// With `--source folder`: decoded images kept for the next loops while they fit in this
-    /// many MiB (a 1920x1200 frame is 6.6 MiB); the images of a larger folder are decoded
-    /// again on every loop, so memory stays bounded whatever the folder's size.
+    /// With `--source folder` and `--source-loop`: decoded images kept for the next loops
+    /// while they fit in this many MiB (a 1920x1200 frame is 6.6 MiB); the images of a larger
+    /// folder are decoded again on every loop, so memory stays bounded whatever its size.
     #[arg(long = "cache-mb", env = "CONESIGHT_CACHE_MB", default_value_t = DEFAULT_CACHE_MB)]
     pub cache_mb: usize,
     /// Frames per second of synthetic and folder sources (GStreamer sources go at their own
@@ -129,6 +133,11 @@ pub struct CameraArgs {
     /// files), standing in for the detector service.
     #[arg(long = "publish-boxes")]
     pub publish_boxes: bool,
+    /// Stop with the error at a frame of another size than the calibration's, whatever the
+    /// source (`conesight run` sets it: someone is watching). Without it only a live camera's
+    /// mismatch is retried (it may have come up in another mode); files stop.
+    #[arg(skip)]
+    pub stop_on_size_mismatch: bool,
 }
 
 impl CameraArgs {
@@ -153,6 +162,7 @@ impl CameraArgs {
             pace_timeout_ms: 1000,
             frames: 0,
             publish_boxes: false,
+            stop_on_size_mismatch: false,
         }
     }
 

@@ -83,7 +83,7 @@ impl Fixture {
         })
     }
 
-    /// The camera service's arguments to publish this folder at `rate_hz`, calibrated.
+    /// The camera service's arguments to publish this folder at `rate_hz`, calibrated, looped.
     pub fn camera_args(&self, rate_hz: f64) -> Vec<String> {
         vec![
             "--source".to_owned(),
@@ -96,6 +96,8 @@ impl Fixture {
             self.extrinsics_yaml.display().to_string(),
             "--rate-hz".to_owned(),
             rate_hz.to_string(),
+            // The tests publish more frames than the folder holds.
+            "--source-loop".to_owned(),
         ]
     }
 
