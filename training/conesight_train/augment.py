@@ -6,7 +6,8 @@ box jitter and for other labellers' framing (the paper's floor: rotation +-15 de
 network cannot reach it, closer than `edge_px` to the patch border, is drawn again, up to
 `geometric_tries` times, else the patch stays as it is), horizontal mirror (left/right
 keypoints swap), truncation (a band at one side replaced by the crop rule's fill, as when a
-cone leaves the image), a neighbouring cone pasted at a side.
+cone leaves the image), occlusion from below (the cone's lower part behind a flat occluder,
+keypoints where they truly are), a neighbouring cone pasted at a side.
 Photometric: exposure (one gain for the whole patch, under- and over-exposed, with a glare
 wash), per-channel colour gain and offset, gamma, Gaussian or motion blur, sensor noise, JPEG
 re-compression, and low resolution (the patch taken down until the cone is 15-40 px tall and
@@ -68,6 +69,12 @@ class AugmentParams:
     # Low resolution: the cone's height in the source (the patch shows it ~65 px tall).
     p_low_resolution: float = 0.3
     low_resolution_cone_px: tuple[float, float] = (15.0, 40.0)
+    # Occlusion from below (a low wall, the car's nose, a nearer cone's tip): the lower part of
+    # the cone, up to this share of its apex-to-base height, hidden behind a flat occluder whose
+    # top edge may slope; the keypoints keep their true places (amodal), so the network learns
+    # to put a hidden base where the stripes and the apex say it is.
+    p_occlude: float = 0.15
+    occlude_share_range: tuple[float, float] = (0.15, 0.55)
 
 
 def _geometric(
@@ -113,6 +120,29 @@ def _truncate(patch: np.ndarray, rng: np.random.Generator, p: AugmentParams) -> 
         out[:width] = 0
     else:
         out[n - width :] = 0
+    return out
+
+
+def _occlude(
+    patch: np.ndarray, keypoints: np.ndarray, rng: np.random.Generator, p: AugmentParams
+) -> np.ndarray:
+    """Hides the cone's lower part behind a flat, noisy occluder (module docs)."""
+    n = patch.shape[0]
+    apex_y = float(keypoints[0, 1])
+    base_y = float((keypoints[3, 1] + keypoints[6, 1]) / 2)
+    height = base_y - apex_y
+    if height <= 2:
+        return patch
+    top = base_y - rng.uniform(*p.occlude_share_range) * height
+    slope = rng.uniform(-0.15, 0.15)
+    rows = np.arange(n, dtype=np.float32)[:, None]
+    cols = np.arange(n, dtype=np.float32)[None, :]
+    hidden = rows >= top + slope * (cols - n / 2)
+    colour = rng.uniform(20, 200, size=3).astype(np.float32)
+    texture = rng.normal(0.0, rng.uniform(2, 15), size=(n, n, 1)).astype(np.float32)
+    occluder = np.clip(colour + texture, 0, 255).astype(np.uint8)
+    out = patch.copy()
+    out[hidden] = occluder[hidden]
     return out
 
 
@@ -210,5 +240,7 @@ class PhotoAugment:
             patch = _neighbour(patch, np.asarray(other), rng)
         if rng.random() < p.p_truncate:
             patch = _truncate(patch, rng, p)
+        if rng.random() < p.p_occlude:
+            patch = _occlude(patch, keypoints, rng, p)
         patch = photometric(patch, rng, p)
         return KeypointPatch(patch, keypoints.astype(np.float32))

@@ -21,6 +21,7 @@ GEOMETRY_ONLY = AugmentParams(
     p_exposure=0.0,
     p_glare=0.0,
     p_low_resolution=0.0,
+    p_occlude=0.0,
     scale_range=(0.85, 1.15),
     shift_fraction=0.06,
 )
@@ -134,3 +135,30 @@ def test_exposure_darkens_and_brightens_whole_patches():
         for seed in range(40)
     ]
     assert min(means) < 80 and max(means) > 170
+
+
+def test_occlusion_hides_the_lower_part_and_keeps_the_true_keypoints():
+    only_occlusion = AugmentParams(
+        p_geometric=0.0,
+        p_mirror=0.0,
+        p_truncate=0.0,
+        p_neighbour=0.0,
+        p_colour=0.0,
+        p_gamma=0.0,
+        p_blur=0.0,
+        p_noise=0.0,
+        p_jpeg=0.0,
+        p_low_resolution=0.0,
+        p_glare=0.0,
+        p_exposure=0.0,
+        p_occlude=1.0,
+        occlude_share_range=(0.4, 0.4),
+    )
+    sample = dots_patch()
+    out = PhotoAugment(only_occlusion)(sample, np.random.default_rng(3))
+    assert np.array_equal(out.keypoints_px, sample.keypoints_px)
+    patch = out.patch_rgb
+    # The apex dot is untouched, the base dots are covered.
+    (ax, ay), (bx, by) = sample.keypoints_px[0].astype(int), sample.keypoints_px[3].astype(int)
+    assert np.array_equal(patch[ay, ax], sample.patch_rgb[ay, ax])
+    assert not np.array_equal(patch[by, bx], sample.patch_rgb[by, bx])

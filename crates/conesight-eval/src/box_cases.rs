@@ -36,6 +36,7 @@ use conesight_pipeline::localiser_stage::cone_box_of;
 use conesight_proto::ConeDetection;
 use conesight_sim::labels::FrameLabels;
 use conesight_sim::scene::Scene;
+use conesight_sim::scene::world::{Distractor, DistractorShape};
 use image::RgbImage;
 use nalgebra::Point3;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
@@ -234,9 +235,15 @@ pub fn frame_cases(
     Ok(records)
 }
 
-/// `scene` with a small cone added in front of up to [`OCCLUDED_TARGETS`] cones 5-20 m ahead
-/// (nearest first), on the ground line from the camera to each, at
-/// [`OCCLUDER_DISTANCE_SHARE`] of its distance.
+/// Half extents of the low wall that hides a cone's lower part (the car's nose, a barrier):
+/// 0.2 m deep, 0.8 m wide, 0.32 m high.
+pub const WALL_HALF_M: [f64; 3] = [0.1, 0.4, 0.16];
+
+/// `scene` with an occluder in front of up to [`OCCLUDED_TARGETS`] cones 5-20 m ahead (nearest
+/// first), on the ground line from the camera to each, at [`OCCLUDER_DISTANCE_SHARE`] of its
+/// distance: a small cone in front of the first (it hides the middle of the target's base,
+/// whose plate still shows on both sides), a low wall facing the camera in front of the others
+/// (it hides the lower part, so the box is cut short).
 pub fn with_occluders(scene: &Scene) -> Scene {
     let world_from_camera = scene.world_from_camera();
     let camera_from_world = world_from_camera.inverse();
@@ -259,15 +266,27 @@ pub fn with_occluders(scene: &Scene) -> Scene {
         let target = scene.world.cones[*i];
         let at =
             ground + (target.world_from_cone.translation.vector - ground) * OCCLUDER_DISTANCE_SHARE;
-        let mut occluder = target;
-        occluder.world_from_cone =
-            Isometry3::from_parts(Translation3::from(at), UnitQuaternion::identity());
-        occluder.tilt_rad = 0.0;
-        occluder.appearance.pattern_key = occluder
-            .appearance
-            .pattern_key
-            .wrapping_add(7919 * (n as u64 + 1));
-        world.cones.push(occluder);
+        if n == 0 {
+            let mut occluder = target;
+            occluder.world_from_cone =
+                Isometry3::from_parts(Translation3::from(at), UnitQuaternion::identity());
+            occluder.tilt_rad = 0.0;
+            occluder.appearance.pattern_key = occluder.appearance.pattern_key.wrapping_add(7919);
+            world.cones.push(occluder);
+        } else {
+            let towards = at - ground;
+            let yaw = towards.y.atan2(towards.x);
+            world.distractors.push(Distractor {
+                world_from_object: Isometry3::from_parts(
+                    Translation3::from(at),
+                    UnitQuaternion::from_axis_angle(&nalgebra::Vector3::z_axis(), yaw),
+                ),
+                shape: DistractorShape::Box {
+                    half_extents_m: WALL_HALF_M,
+                },
+                albedo: [0.25, 0.25, 0.27],
+            });
+        }
     }
     Scene {
         world: Arc::new(world),

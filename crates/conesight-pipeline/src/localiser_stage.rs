@@ -7,7 +7,7 @@
 //! box alone with the larger covariance that goes with it ([`Ranging`] says which). A box cut
 //! by the image's top or bottom edge gives no depth; such a cone needs its keypoints.
 
-use conesight_core::pnp::{BoxTrust, ConeBox, locate_cone_with};
+use conesight_core::pnp::{ConeBox, locate_cone};
 use conesight_core::{
     Camera, ConeClass, ConeGeometry, ConePnpParams, ConeSolver, Extrinsics, GeometryError,
 };
@@ -36,22 +36,6 @@ pub struct LocaliserOutput {
     pub cones: Vec<(usize, LocatedCone)>,
     /// Cones the solver could not place (index in the input, why).
     pub failed: Vec<(usize, GeometryError)>,
-}
-
-/// Share of a box that a nearer cone's box must cover for it to count as occluded.
-pub const OCCLUDED_SHARE: f64 = 0.05;
-
-/// True when another box whose bottom edge is lower in the image (a cone nearer the camera, on
-/// flat ground) covers at least [`OCCLUDED_SHARE`] of `boxes[index]`: its box may be cut short
-/// by the cone in front.
-pub fn occluded(index: usize, boxes: &[conesight_vision::PixelBox]) -> bool {
-    let b = &boxes[index];
-    let area = (b.x_max_px - b.x_min_px) * (b.y_max_px - b.y_min_px);
-    boxes.iter().enumerate().any(|(j, o)| {
-        let w = (b.x_max_px.min(o.x_max_px) - b.x_min_px.max(o.x_min_px)).max(0.0);
-        let h = (b.y_max_px.min(o.y_max_px) - b.y_min_px.max(o.y_min_px)).max(0.0);
-        j != index && o.y_max_px > b.y_max_px && w * h >= OCCLUDED_SHARE * area
-    })
 }
 
 /// The localiser stage for one camera.
@@ -113,23 +97,17 @@ impl LocaliserStage {
     /// Solves every cone; failures are returned beside the cones.
     pub fn localise(&self, cones: &[ConeKeypoints]) -> LocaliserOutput {
         let mut output = LocaliserOutput::default();
-        let boxes: Vec<_> = cones.iter().map(|c| c.detection.box_px).collect();
         for (index, cone) in cones.iter().enumerate() {
             let class = cone.detection.class;
             let (solver, model) = (&self.solvers[class.index()], self.geometry.model(class));
             let cone_box = self
                 .box_ranging
                 .then(|| cone_box_of(&cone.detection.box_px));
-            let trust = if occluded(index, &boxes) {
-                BoxTrust::Occluded
-            } else {
-                BoxTrust::Fuse
-            };
-            let (estimate, ranging) = match locate_cone_with(
+            let (estimate, ranging) = match locate_cone(
                 solver,
                 &model,
                 &cone.observation,
-                cone_box.as_ref().map(|b| (b, trust)),
+                cone_box.as_ref(),
                 REFERENCE_SIGMA_PX,
             ) {
                 Ok(located) => located,

@@ -59,7 +59,7 @@ pub enum Ranging {
     /// The box alone (the keypoints gave no pose): larger covariance.
     Box,
     /// Keypoints and PnP alone: the box lies (it disagreed with the keypoints beyond
-    /// [`BOX_GATE_SIGMAS`], or a nearer cone's box overlaps it), so it was not used.
+    /// [`BOX_GATE_SIGMAS`]), so it was not used.
     KeypointsBoxRefused,
 }
 
@@ -358,15 +358,6 @@ pub fn covers_box(
         && visible.y_max_px <= whole.y_max_px + slack_y
 }
 
-/// How far the localiser may trust a cone's box.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum BoxTrust {
-    /// Fused with the keypoints unless it disagrees beyond [`BOX_GATE_SIGMAS`].
-    Fuse,
-    /// Another cone in front overlaps it: used only when the keypoints give no pose.
-    Occluded,
-}
-
 /// One cone as the localiser ranges it: keypoint PnP (its covariance widened by the keypoints'
 /// common-mode and scale errors, [`super::add_common_mode`], [`super::add_scale_error`]) with
 /// the box-height depth fused in when `cone_box` gives one and agrees within
@@ -380,25 +371,6 @@ pub fn locate_cone(
     cone_box: Option<&ConeBox>,
     reference_sigma_px: f64,
 ) -> Result<(ConeEstimate, Ranging), GeometryError> {
-    locate_cone_with(
-        solver,
-        model,
-        observation,
-        cone_box.map(|b| (b, BoxTrust::Fuse)),
-        reference_sigma_px,
-    )
-}
-
-/// [`locate_cone`] with how far to trust the box.
-pub fn locate_cone_with(
-    solver: &ConeSolver,
-    model: &ConeModel,
-    observation: &ConeObservation,
-    cone_box: Option<(&ConeBox, BoxTrust)>,
-    reference_sigma_px: f64,
-) -> Result<(ConeEstimate, Ranging), GeometryError> {
-    let trust = cone_box.map(|(_, trust)| trust);
-    let cone_box = cone_box.map(|(b, _)| b);
     let params = &solver.params;
     let depth = cone_box.and_then(|b| {
         box_depth(
@@ -418,7 +390,7 @@ pub fn locate_cone_with(
         (Ok(estimate), Some(depth)) => {
             let innovation = depth.depth_m - estimate.position_in_camera.z;
             let sigma = (estimate.covariance_m2[(2, 2)] + depth.sigma_m.powi(2)).sqrt();
-            if trust == Some(BoxTrust::Occluded) || innovation.abs() > BOX_GATE_SIGMAS * sigma {
+            if innovation.abs() > BOX_GATE_SIGMAS * sigma {
                 keypoints_alone(
                     solver,
                     model,
@@ -636,16 +608,6 @@ mod tests {
             locate_cone(&solver, &model, &observation, Some(&short), 1.0).unwrap();
         assert_eq!(ranging, Ranging::KeypointsBoxRefused);
         assert_relative_eq!(alone.position_in_camera.z, 10.0, max_relative = 0.01);
-        // Marked occluded, even an honest box is only a fallback.
-        let (_, ranging) = locate_cone_with(
-            &solver,
-            &model,
-            &observation,
-            Some((&honest, BoxTrust::Occluded)),
-            1.0,
-        )
-        .unwrap();
-        assert_eq!(ranging, Ranging::KeypointsBoxRefused);
     }
 
     #[test]
