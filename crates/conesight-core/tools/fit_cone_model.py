@@ -20,6 +20,12 @@ into build/eval)
 3. Fit. The median height of each level (base, lower and upper stripe edge, apex) and the
    median radius at the base and the two stripe edges; a straight taper is fitted through the
    three radii by least squares. The printed constants go into `model.rs`.
+4. Scale. The PnP solver uses every keypoint at once, with the silhouette's exact geometry, so
+   the medians of step 3 need not give ranges that agree with the boxes'. The records carry
+   both ranges for the geometry they were made with: the median of keypoints / box over the
+   training split's visible cones (small ones at least 20 px tall, large ones at least 10 px)
+   is the factor by which that geometry's keypoint heights and radii are too large. It goes
+   into `SMALL_KEYPOINT_SCALE` and `LARGE_KEYPOINT_SCALE` (times the ones in use).
 """
 
 from __future__ import annotations
@@ -70,6 +76,25 @@ def in_metres(r: dict) -> tuple[np.ndarray, np.ndarray]:
     return heights, radii
 
 
+def scale_steps(path: str) -> dict[str, tuple[int, float]]:
+    """Median keypoint/box range ratio and count, per size (module docs, step 4)."""
+    ratios: dict[str, list[float]] = {"small": [], "large": []}
+    with open(path, encoding="utf-8") as f:
+        for line in f:
+            r = json.loads(line)
+            size = "large" if r["class"] == "large_orange" else "small"
+            if (
+                r["boxes"] == "labelled"
+                and r["split"] == "train"
+                and r["visible"]
+                and r["range_keypoints_m"]
+                and r["range_box_m"]
+                and r["box_height_px"] >= (10.0 if size == "large" else 20.0)
+            ):
+                ratios[size].append(r["range_keypoints_m"] / r["range_box_m"])
+    return {k: (len(v), float(np.median(v))) for k, v in ratios.items() if v}
+
+
 def main() -> None:
     if len(sys.argv) != 2:
         sys.exit(__doc__)
@@ -86,6 +111,11 @@ def main() -> None:
         f"straight taper: {slope:.4f} m/m; radius {base:.4f} m at the base keypoint, "
         f"{apex:.4f} m at the apex height"
     )
+    for size, (count, ratio) in scale_steps(sys.argv[1]).items():
+        print(
+            f"{size}: median keypoint / box range {ratio:.4f} over {count} cones: scale the "
+            f"keypoint geometry in use by {1.0 / ratio:.4f}"
+        )
 
 
 if __name__ == "__main__":

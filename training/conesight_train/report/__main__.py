@@ -430,7 +430,8 @@ def main(argv: list[str] | None = None) -> int:
     accuracy: dict[str, Any] = {
         "exact_boxes": {
             label: metrics.accuracy_3d(records.gt_for(label)) for label in records.keypoint_models()
-        }
+        },
+        "exact_boxes_fused": metrics.accuracy_3d(primary, "cone_box"),
     }
     pipeline_points = None
     if records.pipeline:
@@ -470,6 +471,9 @@ def main(argv: list[str] | None = None) -> int:
     )
     if not real_det["available"]:
         missing.append(f"detector on real frames: {real_det['reason']}")
+
+    # 3a. Boxes that lie.
+    from conesight_train.report import box_cases as box_cases_module
 
     # 3b. Ranges on real frames.
     from conesight_train.report import real_ranging as real_ranging_module
@@ -511,6 +515,7 @@ def main(argv: list[str] | None = None) -> int:
         "keypoints": keypoints,
         "accuracy_3d": accuracy,
         "real_ranging": real_ranging,
+        "box_cases": json_safe(box_cases_module.box_cases(args.records)),
         "perturbation": metrics.perturbation_summary(records.perturbation),
         "pnp_variants": {
             "opencv_version": opencv_version(),

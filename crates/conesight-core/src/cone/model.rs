@@ -31,64 +31,92 @@ pub struct ConeModel {
 
 /// Small cone (228 x 228 x 325 mm): blue, yellow and small orange.
 ///
-/// Fitted to real cones (`tools/fit_cone_model.py`, data and method on the keypoint model
-/// card): on the FSOCO training frames (`../shared/data/real-train/fsoco-boxes/train`, labelled
-/// boxes), the keypoints of every fully visible small cone at least 40 px tall, put in metres
-/// by its box (the box spans the full 325 mm, from the base plate's front edge on the ground to
-/// the top; the plate's depth is accounted for with a camera 1 m above the road). Medians
-/// over 1,770 cones: base keypoints 33 mm above the ground (where the body meets the base plate,
-/// as labellers click it), stripe edges 132 and 222 mm, apex 323 mm; body radius 80.1 mm at
-/// the base keypoints, tapering straight (0.2115 m per m) to 18.7 mm at the apex height. The
-/// paper's model (base on the ground, apex at 325 mm, radii fitted to the 48x64 crops, which
+/// Fitted to real cones in two steps (`tools/fit_cone_model.py`, data and method on the keypoint
+/// model card), on the FSOCO training frames (`../shared/data/real-train/fsoco-boxes/train`,
+/// labelled boxes, the photo's 60-degree pinhole, camera 1 m above the road):
+///
+/// 1. Shape: the keypoints the network puts on every fully visible small cone at least 40 px
+///    tall, put in metres by its box (the box spans the full 325 mm, from the base plate's
+///    front edge on the road to the top; the plate's depth accounted for). Medians over 1,770
+///    cones: base keypoints 33 mm above the ground (where the body meets the base plate, as
+///    labellers click it), stripe edges 132 and 222 mm, apex 322 mm; body radius 79.7 mm at the
+///    base keypoints, tapering straight (0.2045 m per m).
+/// 2. Scale: the whole keypoint geometry (heights and radii; not the plate nor the height of the
+///    box) scaled so that the median range from keypoints + PnP over the range from the box is
+///    1.0 on those frames' cones at least 20 px tall: x 0.977 (4,592 cones).
+///
+/// The paper's model (base on the ground, apex at 325 mm, radii fitted to the 48x64 crops, which
 /// are squeezed sideways) made a real cone's keypoints look 12 % smaller than they are, and
 /// put it that much too far.
 const SMALL: ConeModel = ConeModel::tapered(
     0.114,
-    SMALL_PLATE_HEIGHT_M,
+    SMALL_KEYPOINT_HEIGHTS_M[0],
     0.325,
-    [SMALL_PLATE_HEIGHT_M, 0.132, 0.222, 0.323],
+    SMALL_KEYPOINT_HEIGHTS_M,
     SMALL_BASE_RADIUS_M,
     SMALL_APEX_RADIUS_M,
-    &[(0.132, 0.222)],
+    &[(SMALL_KEYPOINT_HEIGHTS_M[1], SMALL_KEYPOINT_HEIGHTS_M[2])],
 );
 
-/// Height of the small cone's base plate, where the body and the base keypoints start (fitted).
-const SMALL_PLATE_HEIGHT_M: f64 = 0.033;
-/// Body radius of the small cone at the base keypoint (fitted, see above).
-const SMALL_BASE_RADIUS_M: f64 = 0.0801;
-/// Body radius of the small cone at the apex keypoint's height (fitted, see above).
-const SMALL_APEX_RADIUS_M: f64 = 0.0187;
+/// The fit's scale step (see [`SMALL`]).
+const SMALL_KEYPOINT_SCALE: f64 = 0.977;
+/// Keypoint heights of the small cone: base (the plate's top), stripe edges, apex (fitted).
+const SMALL_KEYPOINT_HEIGHTS_M: [f64; 4] = [
+    0.0333 * SMALL_KEYPOINT_SCALE,
+    0.132 * SMALL_KEYPOINT_SCALE,
+    0.2222 * SMALL_KEYPOINT_SCALE,
+    0.3219 * SMALL_KEYPOINT_SCALE,
+];
+/// Body radius of the small cone at the base keypoint (fitted).
+const SMALL_BASE_RADIUS_M: f64 = 0.0796 * SMALL_KEYPOINT_SCALE;
+/// Body radius of the small cone at the apex keypoint's height (fitted).
+const SMALL_APEX_RADIUS_M: f64 = 0.0206 * SMALL_KEYPOINT_SCALE;
 
 /// Height scale of the large cone relative to the small one (505 / 325).
 const LARGE_HEIGHT_SCALE: f64 = 0.505 / 0.325;
 /// Width scale of the large cone relative to the small one (plate 285 / 228).
 const LARGE_WIDTH_SCALE: f64 = 0.285 / 0.228;
+/// The fit's scale step for the large cone: its keypoint geometry (the small cone's, scaled to
+/// the large one's size) scaled so that the median range from keypoints over the range from
+/// the box is 1.0 on the training frames' 152 fully visible large cones at least 10 px tall.
+const LARGE_KEYPOINT_SCALE: f64 = 0.855;
 
 /// Large orange cone (285 x 285 x 505 mm).
 ///
-/// Assumption (no large cones carry keypoint labels): the large cone is the small cone scaled by
-/// 505/325 in height and by 285/228 (the plate ratio) in width, so its plate, keypoint heights
-/// and radii follow from the small cone's fit. Per the FSG rules it has two white stripes; the
-/// keypoints are the outer edges of the striped zone (bottom of the lower stripe, top of the
-/// upper one), and the two stripes split that zone with a gap of about 1/6 of it (an
-/// assumption for the renderer, not a measured value).
+/// No large cones carry keypoint labels: the shape is the small cone's, scaled by 505/325 in
+/// height and by 285/228 (the plate ratio) in width, then the keypoint geometry scaled by
+/// [`LARGE_KEYPOINT_SCALE`] (fitted as the small cone's scale step). Per the FSG rules it has
+/// two white stripes; the keypoints are the outer edges of the striped zone (bottom of the
+/// lower stripe, top of the upper one), and the two stripes split that zone with a gap of about
+/// 1/6 of it (an assumption for the renderer, not a measured value).
 const LARGE: ConeModel = ConeModel::tapered(
     0.1425,
-    SMALL_PLATE_HEIGHT_M * LARGE_HEIGHT_SCALE,
+    LARGE_KEYPOINT_HEIGHTS_M[0],
     0.505,
-    [
-        SMALL_PLATE_HEIGHT_M * LARGE_HEIGHT_SCALE,
-        0.132 * LARGE_HEIGHT_SCALE,
-        0.222 * LARGE_HEIGHT_SCALE,
-        0.323 * LARGE_HEIGHT_SCALE,
-    ],
-    SMALL_BASE_RADIUS_M * LARGE_WIDTH_SCALE,
-    SMALL_APEX_RADIUS_M * LARGE_WIDTH_SCALE,
+    LARGE_KEYPOINT_HEIGHTS_M,
+    SMALL_BASE_RADIUS_M * LARGE_WIDTH_SCALE * LARGE_KEYPOINT_SCALE,
+    SMALL_APEX_RADIUS_M * LARGE_WIDTH_SCALE * LARGE_KEYPOINT_SCALE,
     &[
-        (0.132 * LARGE_HEIGHT_SCALE, 0.162 * LARGE_HEIGHT_SCALE),
-        (0.192 * LARGE_HEIGHT_SCALE, 0.222 * LARGE_HEIGHT_SCALE),
+        (
+            LARGE_KEYPOINT_HEIGHTS_M[1],
+            LARGE_KEYPOINT_HEIGHTS_M[1] + 0.4167 * LARGE_STRIPE_ZONE_M,
+        ),
+        (
+            LARGE_KEYPOINT_HEIGHTS_M[2] - 0.4167 * LARGE_STRIPE_ZONE_M,
+            LARGE_KEYPOINT_HEIGHTS_M[2],
+        ),
     ],
 );
+
+/// Keypoint heights of the large cone (see [`LARGE`]).
+const LARGE_KEYPOINT_HEIGHTS_M: [f64; 4] = [
+    SMALL_KEYPOINT_HEIGHTS_M[0] * LARGE_HEIGHT_SCALE * LARGE_KEYPOINT_SCALE,
+    SMALL_KEYPOINT_HEIGHTS_M[1] * LARGE_HEIGHT_SCALE * LARGE_KEYPOINT_SCALE,
+    SMALL_KEYPOINT_HEIGHTS_M[2] * LARGE_HEIGHT_SCALE * LARGE_KEYPOINT_SCALE,
+    SMALL_KEYPOINT_HEIGHTS_M[3] * LARGE_HEIGHT_SCALE * LARGE_KEYPOINT_SCALE,
+];
+/// Height of the large cone's striped zone.
+const LARGE_STRIPE_ZONE_M: f64 = LARGE_KEYPOINT_HEIGHTS_M[2] - LARGE_KEYPOINT_HEIGHTS_M[1];
 
 impl ConeModel {
     /// A straight-tapered body from `base_radius_m` at `keypoint_heights_m[0]` to

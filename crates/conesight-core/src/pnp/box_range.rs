@@ -382,6 +382,16 @@ pub fn locate_cone(
         )
         .ok()
     });
+    // A cone whose axis the keypoints put outside the image is more than half cut off: what
+    // shows is a sliver, and neither its box nor its keypoints say where it stands.
+    let k = &observation.keypoints_px;
+    let axis_x = (k[0].x + 0.5 * (k[3].x + k[6].x)) / 2.0;
+    if axis_x.is_finite() && !(0.0..=f64::from(solver.camera.width_px)).contains(&axis_x) {
+        return Err(GeometryError::SolverFailed {
+            reason: "the keypoints put the cone's axis outside the image: more than half of it is \
+                     cut off by the image's edge",
+        });
+    }
     let solved = solver.solve(observation).map(|e| {
         let e = super::add_common_mode(&e, observation, &solver.camera, reference_sigma_px);
         super::add_scale_error(&e, observation)
@@ -626,5 +636,15 @@ mod tests {
         let estimate = solver.solve(&observation).unwrap();
         assert!(covers_box(&camera(), &model, &estimate, &own));
         assert!(!covers_box(&camera(), &model, &estimate, &near));
+    }
+
+    #[test]
+    fn a_cone_whose_axis_is_outside_the_image_gets_no_range() {
+        let model = ConeModel::small();
+        // A cone 1.5 m left of a camera 1.4 m away: its axis is off the image's left edge.
+        let (solver, observation) = exact_cone(1.4, -1.5);
+        assert!(observation.keypoints_px[0].x < 0.0);
+        let error = locate_cone(&solver, &model, &observation, None, 1.0).unwrap_err();
+        assert!(error.to_string().contains("outside the image"), "{error}");
     }
 }
