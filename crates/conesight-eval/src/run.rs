@@ -375,7 +375,7 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Meta> {
                 config.range_m,
                 (seed, index),
             )? {
-                if !record.case.starts_with("occluded") {
+                if !(record.case.starts_with("occluded") || record.case == "cut") {
                     box_cases_out.write(&record)?;
                 }
             }
@@ -392,7 +392,7 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Meta> {
                 config.range_m,
                 (seed, index),
             )? {
-                if record.case.starts_with("occluded") {
+                if record.case.starts_with("occluded") || record.case == "cut" {
                     box_cases_out.write(&record)?;
                 }
             }

@@ -1,7 +1,7 @@
 //! The real-frame consistency check (issue 37): on the real FSOCO test split, never trained on,
 //! the range from keypoints + PnP over the range from the box's height has a median within
-//! 0.97-1.03 in every box-height band with at least 30 fully visible cones, for the small cones
-//! and the large ones. The shipped keypoint network and cone geometry, labelled boxes, the
+//! 0.97-1.03 in every box-height band from 10 px up with at least 30 fully visible cones, for
+//! the small cones and the large ones. The shipped keypoint network and cone geometry, labelled boxes, the
 //! assumed 60-degree camera 1 m above the road (see `conesight_eval::real`).
 //!
 //! Reads `../shared/data/real-train/fsoco-boxes` and skips (passing, with a message) when it is
@@ -16,9 +16,10 @@ use conesight_core::ConeGeometry;
 use conesight_eval::real::{RealConfig, run_real};
 use conesight_onnx::ModelOptions;
 
-/// Box-height bands, pixels.
+/// Box-height bands, pixels: issue 37 measured from 20 px; boxes under 10 px (a few pixels a
+/// keypoint) are reported by `make eval` but not held to the bound.
 const BANDS_PX: [(f64, f64); 4] = [
-    (0.0, 20.0),
+    (10.0, 20.0),
     (20.0, 40.0),
     (40.0, 80.0),
     (80.0, f64::INFINITY),

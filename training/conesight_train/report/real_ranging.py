@@ -22,7 +22,15 @@ import numpy as np
 
 from conesight_train.report.records import read_jsonl
 
-HEIGHT_BANDS_PX: tuple[tuple[float, float], ...] = ((0, 20), (20, 40), (40, 80), (80, np.inf))
+HEIGHT_BANDS_PX: tuple[tuple[float, float], ...] = (
+    (0, 10),
+    (10, 20),
+    (20, 40),
+    (40, 80),
+    (80, np.inf),
+)
+# Boxes under this are reported, not held to the bound: a few pixels a keypoint.
+MIN_CHECKED_PX = 10.0
 HAT_BANDS_PX: tuple[tuple[float, float], ...] = (
     (0, 15),
     (15, 20),
@@ -87,7 +95,7 @@ def consistency_rows(records: Sequence[dict[str, Any]], boxes: str, split: str) 
                     "fused_over_box": _median(
                         [r["range_fused_m"] / r["range_box_m"] for r in cell if r["range_fused_m"]]
                     ),
-                    "checked": len(cell) >= MIN_CONES_CHECKED,
+                    "checked": len(cell) >= MIN_CONES_CHECKED and band[0] >= MIN_CHECKED_PX,
                 }
             )
     return rows
