@@ -149,6 +149,13 @@ fn read_labels(
             path.display(),
             number + 1
         );
+        anyhow::ensure!(
+            fields[0] >= 0.0 && fields[0].fract() == 0.0,
+            "{} line {}: class id {} is not a whole number >= 0",
+            path.display(),
+            number + 1,
+            fields[0]
+        );
         let id = fields[0] as usize;
         let class = *names.classes.get(id).with_context(|| {
             format!(
@@ -576,6 +583,6 @@ mod tests {
             ..a
         };
         assert!(overlaps(&a, &b) && !overlaps(&a, &c));
-        assert!((iou(&a, &b) - 50.0 / 150.0).abs() < 1e-12);
+        assert!((iou(&a, &b) - 0.5).abs() < 1e-12);
     }
 }
