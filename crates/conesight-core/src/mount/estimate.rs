@@ -61,7 +61,7 @@ impl Default for MountParams {
             pnp: ConePnpParams::default(),
             reference_sigma_px: crate::pnp::DEFAULT_KEYPOINT_SIGMA_PX,
             plane: PlaneFitParams::default(),
-            max_range_m: 40.0,
+            max_range_m: 30.0,
             max_rounds: 6,
             settle_angle_rad: 1e-5,
             settle_height_m: 1e-4,
@@ -106,16 +106,22 @@ pub struct MountEstimate {
     pub height_sigma_m: f64,
     /// Every cone placed within the range used, with its height above the fitted road.
     pub cones: Vec<MountedCone>,
-    /// Cones the solver could not place (or placed too far).
+    /// Cones the solver could not place, or placed beyond `max_range_m`.
     pub unplaced: usize,
+    /// Cones farther than this were not used, metres.
+    pub max_range_m: f64,
     /// Frames the cones came from.
     pub frames: usize,
     /// Rounds of solving and fitting.
     pub rounds: usize,
     /// Root mean square height of the inlier bases above the road, metres.
     pub residual_rms_m: f64,
-    /// The fit's chi-square per degree of freedom (above 1: the bases scatter more than
-    /// their covariances say, and the standard deviations were scaled up to match).
+    /// How much more the bases scatter about the road than their covariances say, metres
+    /// (a standard deviation added to each in quadrature; the standard deviations above
+    /// include it). Centimetres on a flat road with a good calibration; more where a guessed
+    /// calibration or lens distortion bends the road, or the road is not flat.
+    pub extra_sigma_m: f64,
+    /// The fit's chi-square per degree of freedom.
     pub chi2_per_dof: f64,
 }
 
@@ -154,11 +160,11 @@ impl MountEstimate {
              vehicle_from_camera:\n  translation_m: [{x:.4}, {y:.4}, {z:.4}]\n  rotation:\n    \
              rpy_rad: [{roll:.6}, {pitch:.6}, {yaw:.6}]\n\
              # Read by people, ignored by conesight: one standard deviation of each estimate, \
-             the cones\n# used and how far their bases lie from the fitted road (root mean \
-             square).\n\
+             the cones\n# used, how far their bases lie from the fitted road (root mean square) and \
+             how much more\n# they scatter than the keypoints' own uncertainty says.\n\
              mount_uncertainty:\n  roll_sigma_rad: {roll_sigma:.6}\n  pitch_sigma_rad: \
              {pitch_sigma:.6}\n  height_sigma_m: {height_sigma:.4}\n  cones: {inliers}\n  \
-             frames: {frames}\n  residual_rms_m: {rms:.4}\n",
+             frames: {frames}\n  residual_rms_m: {rms:.4}\n  extra_scatter_m: {extra:.4}\n",
             inliers = self.inliers(),
             frames = self.frames,
             pitch_deg = self.pitch_rad.to_degrees(),
@@ -173,6 +179,7 @@ impl MountEstimate {
             roll_sigma = self.roll_sigma_rad,
             pitch_sigma = self.pitch_sigma_rad,
             rms = self.residual_rms_m,
+            extra = self.extra_sigma_m,
         )
     }
 }
@@ -186,17 +193,17 @@ pub fn roll_pitch_of(up_in_camera: &Vector3<f64>) -> (f64, f64) {
     (roll, pitch)
 }
 
-/// Estimates the camera's mounting from `cones` (module docs). `start` gives the first
-/// round's cone axis and camera height (the paper's mounting, level and 1 m high, will do for
-/// any camera within 40 degrees of level).
+/// Estimates the camera's mounting from `cones`, found in `frames` frames (module docs).
+/// `start` gives the first round's cone axis and camera height (the paper's mounting, level and
+/// 1 m high, will do for any camera within 40 degrees of level).
 pub fn estimate_mount(
     camera: &Camera,
     geometry: &ConeGeometry,
     cones: &[MountCone],
+    frames: usize,
     start: &Extrinsics,
     params: &MountParams,
 ) -> Result<MountEstimate, MountError> {
-    let frames = cones.iter().map(|c| c.frame + 1).max().unwrap_or(0);
     let start_plane = GroundPlane::from_extrinsics(start);
     let prior_up = start_plane.up_in_camera;
     let mut up = prior_up;
@@ -297,9 +304,11 @@ pub fn estimate_mount(
             height_sigma_m,
             cones: mounted,
             unplaced: cones.len() - placed.len(),
+            max_range_m: params.max_range_m,
             frames,
             rounds: round,
             residual_rms_m: fit.residual_rms_m,
+            extra_sigma_m: fit.extra_sigma_m,
             chi2_per_dof: fit.chi2_per_dof,
         });
     }
@@ -406,6 +415,7 @@ mod tests {
                 &camera,
                 &ConeGeometry::shipped(),
                 &cones,
+                3,
                 &Extrinsics::paper_default(),
                 &MountParams::default(),
             )
@@ -434,6 +444,7 @@ mod tests {
             &camera,
             &ConeGeometry::shipped(),
             &cones,
+            3,
             &Extrinsics::paper_default(),
             &MountParams::default(),
         )
@@ -463,6 +474,7 @@ mod tests {
             &camera,
             &ConeGeometry::shipped(),
             &cones[..3],
+            3,
             &Extrinsics::paper_default(),
             &MountParams::default(),
         )
@@ -481,6 +493,7 @@ mod tests {
             &camera,
             &ConeGeometry::shipped(),
             &line,
+            1,
             &Extrinsics::paper_default(),
             &MountParams::default(),
         )

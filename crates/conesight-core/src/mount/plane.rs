@@ -25,7 +25,8 @@ pub struct PlaneFitParams {
     /// Added to every base's standard deviation along the normal (in quadrature), metres: a
     /// road is not a plane to the millimetre, nor does a cone stand on it to the millimetre.
     pub road_sigma_m: f64,
-    /// A base within this many of its standard deviations of the plane is an inlier.
+    /// A base within this many of its standard deviations of the plane (times the bases'
+    /// scatter in standard deviations, when they scatter more) is an inlier.
     pub inlier_sigmas: f64,
     /// RANSAC hypotheses (triples of bases).
     pub hypotheses: usize,
@@ -62,13 +63,17 @@ pub struct PlaneFit {
     /// Height of each base above the plane, metres.
     pub heights_m: Vec<f64>,
     /// Covariance of `(a, b, h)`: `a` and `b` small turns of the normal towards `tangents[0]`
-    /// and `tangents[1]`, `h` the camera height; scaled by the fit's chi-square per degree of
-    /// freedom when that exceeds 1 (the bases scatter more than their covariances say).
+    /// and `tangents[1]`, `h` the camera height, with every base's variance widened by
+    /// `extra_sigma_m`; scaled by the fit's chi-square per degree of freedom when that still
+    /// exceeds 1.
     pub covariance: Matrix3<f64>,
     /// Two unit vectors in the plane, orthogonal to each other.
     pub tangents: [Vector3<f64>; 2],
     /// Root mean square height of the inliers above the plane, metres.
     pub residual_rms_m: f64,
+    /// How much more the bases scatter than their covariances say (a standard deviation added
+    /// to every base's in quadrature, estimated from the fit), metres.
+    pub extra_sigma_m: f64,
     /// Chi-square of the inliers per degree of freedom.
     pub chi2_per_dof: f64,
 }
@@ -92,9 +97,23 @@ impl SplitMix64 {
 }
 
 /// Seed of the RANSAC draws.
-const RANSAC_SEED: u64 = 0x6d6f_756e_74;
+const RANSAC_SEED: u64 = 0x006d_6f75_6e74;
 /// Rounds of reweighting and inlier reselection after RANSAC.
 const REFINE_ROUNDS: usize = 10;
+
+/// The median of `values` (reordered); 0 when empty.
+fn median_of(values: &mut [f64]) -> f64 {
+    if values.is_empty() {
+        return 0.0;
+    }
+    values.sort_by(f64::total_cmp);
+    let mid = values.len() / 2;
+    if values.len() % 2 == 1 {
+        values[mid]
+    } else {
+        0.5 * (values[mid - 1] + values[mid])
+    }
+}
 
 /// Variance of a base's height above the plane of normal `up`, m^2.
 fn height_variance(point: &BasePoint, up: &Vector3<f64>, params: &PlaneFitParams) -> f64 {
@@ -119,33 +138,29 @@ pub fn fit_plane(
         });
     }
     let prior_up = prior_up.normalize();
-    let threshold2 = params.inlier_sigmas.powi(2);
-    // MSAC: each base costs its squared normalised height, at most the threshold.
-    let score = |up: &Vector3<f64>, height_m: f64| -> (f64, usize) {
-        let mut cost = 0.0;
-        let mut inliers = 0;
-        for point in points {
-            let r2 = (height_m + up.dot(&point.position_in_camera.coords)).powi(2)
-                / height_variance(point, up, params);
-            if r2 <= threshold2 {
-                inliers += 1;
-                cost += r2;
-            } else {
-                cost += threshold2;
-            }
-        }
-        (cost, inliers)
+    // Squared normalised heights of every base above a plane.
+    let normalised = |up: &Vector3<f64>, height_m: f64| -> Vec<f64> {
+        points
+            .iter()
+            .map(|p| {
+                (height_m + up.dot(&p.position_in_camera.coords)).powi(2)
+                    / height_variance(p, up, params)
+            })
+            .collect()
     };
     let plausible = |up: &Vector3<f64>, height_m: f64| {
         up.angle(&prior_up) <= params.max_tilt_from_prior_rad
             && (params.height_range_m.0..=params.height_range_m.1).contains(&height_m)
     };
+    // Least median of squares: the plane that half the bases fit best, whatever their scatter
+    // (real bases scatter more than their covariances say: a guessed calibration bends the
+    // road, a real road is not flat).
     let mut best: Option<(f64, Vector3<f64>, f64)> = None;
     let mut consider = |up: Vector3<f64>, height_m: f64| {
         if !plausible(&up, height_m) {
             return;
         }
-        let (cost, _) = score(&up, height_m);
+        let cost = median_of(&mut normalised(&up, height_m));
         if best.as_ref().is_none_or(|(c, _, _)| cost < *c) {
             best = Some((cost, up, height_m));
         }
@@ -186,14 +201,28 @@ pub fn fit_plane(
     };
 
     // Weighted least squares on the inliers, reweighted and reselected until they settle.
+    // Real bases scatter more than their covariances say (a guessed calibration bends the
+    // road, a real road is not flat): that scatter is estimated as one more variance, common
+    // to every base, from the median absolute height over all bases; it widens both the
+    // inlier gate and the weights, so near cones do not outvote the rest beyond what the
+    // data support.
     let mut inliers: Vec<bool> = Vec::new();
+    let mut extra_variance_m2 = 0.0;
     for _ in 0..REFINE_ROUNDS {
-        let now: Vec<bool> = points
+        let heights: Vec<f64> = points
             .iter()
-            .map(|p| {
-                (height_m + up.dot(&p.position_in_camera.coords)).powi(2)
-                    <= threshold2 * height_variance(p, &up, params)
-            })
+            .map(|p| height_m + up.dot(&p.position_in_camera.coords))
+            .collect();
+        let variances: Vec<f64> = points
+            .iter()
+            .map(|p| height_variance(p, &up, params))
+            .collect();
+        let spread_m = 1.4826 * median_of(&mut heights.iter().map(|h| h.abs()).collect::<Vec<_>>());
+        extra_variance_m2 = (spread_m.powi(2) - median_of(&mut variances.clone())).max(0.0);
+        let now: Vec<bool> = heights
+            .iter()
+            .zip(&variances)
+            .map(|(h, v)| h * h <= params.inlier_sigmas.powi(2) * (v + extra_variance_m2))
             .collect();
         let count = now.iter().filter(|i| **i).count();
         if count < needed {
@@ -205,7 +234,8 @@ pub fn fit_plane(
         }
         let settled = now == inliers;
         inliers = now;
-        let (new_up, new_height_m) = weighted_plane(points, &inliers, &up, &prior_up, params);
+        let (new_up, new_height_m) =
+            weighted_plane(points, &inliers, &up, &prior_up, extra_variance_m2, params);
         let moved = new_up.angle(&up) + (new_height_m - height_m).abs();
         (up, height_m) = (new_up, new_height_m);
         if settled && moved < 1e-9 {
@@ -219,7 +249,14 @@ pub fn fit_plane(
             needed,
         });
     }
-    Ok(finish(points, inliers, up, height_m, params))
+    Ok(finish(
+        points,
+        inliers,
+        up,
+        height_m,
+        extra_variance_m2,
+        params,
+    ))
 }
 
 /// The plane minimising the weighted squared heights of the inlier bases (weights from their
@@ -230,6 +267,7 @@ fn weighted_plane(
     inliers: &[bool],
     up: &Vector3<f64>,
     prior_up: &Vector3<f64>,
+    extra_variance_m2: f64,
     params: &PlaneFitParams,
 ) -> (Vector3<f64>, f64) {
     let mut weight_sum = 0.0;
@@ -239,7 +277,7 @@ fn weighted_plane(
         .zip(inliers)
         .map(|(p, inlier)| {
             if *inlier {
-                1.0 / height_variance(p, up, params)
+                1.0 / (height_variance(p, up, params) + extra_variance_m2)
             } else {
                 0.0
             }
@@ -270,6 +308,7 @@ fn finish(
     inliers: Vec<bool>,
     up: Vector3<f64>,
     height_m: f64,
+    extra_variance_m2: f64,
     params: &PlaneFitParams,
 ) -> PlaneFit {
     let reference = if up.x.abs() < 0.9 {
@@ -289,7 +328,7 @@ fn finish(
         if !inlier {
             continue;
         }
-        let w = 1.0 / height_variance(p, &up, params);
+        let w = 1.0 / (height_variance(p, &up, params) + extra_variance_m2);
         let q = p.position_in_camera.coords;
         let jacobian = Vector3::new(t0.dot(&q), t1.dot(&q), 1.0);
         information += jacobian * jacobian.transpose() * w;
@@ -301,7 +340,7 @@ fn finish(
     let chi2_per_dof = chi2 / dof;
     let covariance = information
         .try_inverse()
-        .map_or_else(|| Matrix3::from_diagonal_element(f64::INFINITY), |c| c)
+        .unwrap_or_else(|| Matrix3::from_diagonal_element(f64::INFINITY))
         * chi2_per_dof.max(1.0);
     PlaneFit {
         up_in_camera: up,
@@ -311,6 +350,7 @@ fn finish(
         covariance,
         tangents: [t0, t1],
         residual_rms_m: (sum2 / count.max(1) as f64).sqrt(),
+        extra_sigma_m: extra_variance_m2.sqrt(),
         chi2_per_dof,
     }
 }
