@@ -3,7 +3,8 @@
 //! 15 degrees up to 15 degrees down; on the 18 real onboard AMZ frames of `../shared` (a
 //! guessed 60-degree pinhole), `predict` with the extrinsics it writes puts the median cone
 //! base within 0.1 m of the road in every 10 m band out to 30 m; and it refuses too few cones,
-//! frames of different sizes and a calibration of another size with errors that say so.
+//! frames of different sizes and a calibration of another size with errors that say so. At run
+//! time, the localiser's mount check fires (once) for a wrong mounting and not for the right one.
 #![allow(clippy::unwrap_used, clippy::expect_used, missing_docs)]
 
 mod common_process;
@@ -11,7 +12,7 @@ mod common_process;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use common_process::{BIN, TempDir};
+use common_process::{BIN, Process, TempDir, free_port, http_get, metric};
 use conesight_core::{Camera, Extrinsics};
 use conesight_sim::frames::{FrameParams, random_frame};
 use conesight_sim::render::Renderer;
@@ -332,4 +333,134 @@ fn mount_says_what_is_wrong_with_its_input() {
         stderr.contains("image is 800x600 px but the camera calibration is for 640x480"),
         "{stderr}"
     );
+}
+
+/// `conesight run` on a looped rendered drive (the renderer's camera 1 m high and level, its
+/// exact boxes) with `extrinsics` for the localiser, until its mount check holds 30 cones and
+/// a few frames more: the localiser's `conesight_mount_*` metrics, the run's log and its
+/// stdout (the summary).
+fn run_with_mounting(dir: &TempDir, name: &str, extrinsics: &str) -> (String, String, String) {
+    let path = dir.join(&format!("{name}.yaml"));
+    std::fs::write(&path, extrinsics).unwrap();
+    let base = free_port();
+    let log = dir.join(&format!("{name}.log"));
+    let out = dir.join(name);
+    let namespace = format!("{name}{}", std::process::id());
+    let mut run = Process::start(
+        name,
+        &[
+            "run",
+            "--frames",
+            "0",
+            "--rate-hz",
+            "5",
+            "--preload",
+            "6",
+            "--boxes",
+            "truth",
+            "--extrinsics",
+            path.to_str().unwrap(),
+            "--http-base-port",
+            &base.to_string(),
+            "--namespace",
+            &namespace,
+            "--save-every",
+            "0",
+            "--out",
+            out.to_str().unwrap(),
+            "--log-file",
+            log.to_str().unwrap(),
+        ],
+        &dir.join(&format!("{name}.stderr")),
+    );
+    // The localiser is the fourth service: --http-base-port + 3.
+    let localiser = base + 3;
+    let started = std::time::Instant::now();
+    let mut checked_at = None;
+    let metrics = loop {
+        let metrics = http_get(localiser, "/metrics").unwrap_or_default();
+        let cones = metric(&metrics, "conesight_mount_check_cones").unwrap_or(0.0);
+        if cones >= 30.0 {
+            // A few frames more: a mismatch must not be logged twice.
+            let at = *checked_at.get_or_insert_with(std::time::Instant::now);
+            if at.elapsed() > std::time::Duration::from_secs(3) {
+                break metrics;
+            }
+        }
+        assert!(
+            started.elapsed() < std::time::Duration::from_secs(120),
+            "the mount check never held 30 cones:\n{metrics}\n{}",
+            run.log_text()
+        );
+        std::thread::sleep(std::time::Duration::from_millis(250));
+    };
+    let status = run.interrupt(std::time::Duration::from_secs(30));
+    assert!(status.success(), "{}", run.log_text());
+    (
+        metrics,
+        std::fs::read_to_string(&log).unwrap(),
+        run.stdout(),
+    )
+}
+
+/// Issue 39, a wrong mount gives nonsense in silence: with extrinsics 3 degrees off in pitch
+/// the localiser logs the mismatch once (the numbers and `conesight mount`), raises
+/// `conesight_mount_mismatch` and the run's summary says it; with the right ones it stays
+/// quiet.
+#[test]
+fn the_run_time_mount_check_fires_for_a_wrong_mounting_only() {
+    let dir = TempDir::new("mount-check");
+    let (metrics, log, stdout) = run_with_mounting(
+        &dir,
+        "wrong",
+        "vehicle_from_camera: {height_m: 1.0, pitch_down_rad: 0.0524}\n",
+    );
+    let value = |metrics: &str, name: &str| metric(metrics, name).unwrap();
+    eprintln!(
+        "wrong mounting: mismatch {}, median base height {:+.3} m, slope {:+.4}",
+        value(&metrics, "conesight_mount_mismatch"),
+        value(&metrics, "conesight_mount_base_height_meters"),
+        value(&metrics, "conesight_mount_height_slope_ratio")
+    );
+    assert_eq!(
+        value(&metrics, "conesight_mount_mismatch"),
+        1.0,
+        "{metrics}"
+    );
+    // Pitched 3 degrees down in the file, level in truth: bases sink 5 cm per metre.
+    let slope = value(&metrics, "conesight_mount_height_slope_ratio");
+    assert!((-0.07..-0.035).contains(&slope), "{slope}");
+    let warnings: Vec<&str> = log
+        .lines()
+        .filter(|l| l.contains("WARN") && l.contains("conesight mount"))
+        .collect();
+    assert_eq!(warnings.len(), 1, "{log}");
+    assert!(
+        warnings[0].contains("cone bases lie") && warnings[0].contains("--extrinsics"),
+        "{}",
+        warnings[0]
+    );
+    assert!(
+        stdout.contains("mount: cone bases lie") && stdout.contains("conesight mount"),
+        "{stdout}"
+    );
+
+    let (metrics, log, stdout) = run_with_mounting(
+        &dir,
+        "right",
+        "vehicle_from_camera: {height_m: 1.0, pitch_down_rad: 0.0}\n",
+    );
+    eprintln!(
+        "right mounting: mismatch {}, median base height {:+.3} m, slope {:+.4}",
+        value(&metrics, "conesight_mount_mismatch"),
+        value(&metrics, "conesight_mount_base_height_meters"),
+        value(&metrics, "conesight_mount_height_slope_ratio")
+    );
+    assert_eq!(
+        value(&metrics, "conesight_mount_mismatch"),
+        0.0,
+        "{metrics}"
+    );
+    assert!(!log.contains("conesight mount"), "{log}");
+    assert!(!stdout.contains("mount:"), "{stdout}");
 }
