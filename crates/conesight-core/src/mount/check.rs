@@ -62,15 +62,16 @@ impl MountCheckStatus {
         self.slope.unwrap_or(0.0).atan()
     }
 
-    /// One sentence with the numbers, for logs and the dashboard.
+    /// One sentence with the numbers, for logs and the dashboard (the slope when it means a
+    /// pitch at least 0.1 degrees off).
     pub fn describe(&self) -> String {
         let slope = match self.slope {
-            Some(slope) => format!(
+            Some(slope) if slope.atan().abs() >= 0.1_f64.to_radians() => format!(
                 ", {:+.1} cm per metre of range (a pitch about {:+.1} degrees off)",
                 100.0 * slope,
                 self.pitch_error_rad().to_degrees()
             ),
-            None => String::new(),
+            _ => String::new(),
         };
         format!(
             "cone bases lie {:+.2} m from the road of the extrinsics (median of {} cones){slope}",
