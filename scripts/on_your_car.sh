@@ -5,8 +5,10 @@
 # keypoints in `conesight run`) until the localiser has published cones, recorded by `conesight
 # record`, then replayed through a fresh pipeline and compared with `conesight diff`. Then, when
 # ../shared/data/real-dev/amz-sequence is there, the guide on those 18 real onboard frames: a
-# guessed calibration, predict --save, a run over the folder (it ends by itself) recorded,
-# replayed by the recording's base name and compared with the live run. Exits non-zero on the
+# guessed calibration, the mounting from the cones (conesight mount; the cone bases then stand on
+# the road out to 30 m), predict --save, a run over the folder (it ends by itself; its mount
+# check stays quiet) recorded, replayed by the recording's base name and compared with the live
+# run. Exits non-zero on the
 # first step that fails. `make test` runs it with PROFILE=debug (the test build's binaries);
 # by default it builds and uses the release binaries.
 set -euo pipefail
@@ -173,7 +175,7 @@ ln -s "$AMZ" "$REAL/frames"
 cd "$REAL"
 FRAMES=$(find -L frames -maxdepth 1 -name '*.jpg' | wc -l)
 
-step "real frames, 1-2. a guessed calibration (no calibration yet) and a level mounting 1 m high"
+step "real frames, 1-2. a guessed calibration (no calibration yet) and the mounting from the cones"
 cat > cam.yaml <<'EOF'
 # cam.yaml
 image_width: 1920
@@ -183,9 +185,8 @@ camera_matrix: {rows: 3, cols: 3, data: [1662.8, 0.0, 960.0, 0.0, 1662.8, 540.0,
 distortion_model: plumb_bob
 distortion_coefficients: {rows: 1, cols: 5, data: [0.0, 0.0, 0.0, 0.0, 0.0]}
 EOF
-cat > mount.yaml <<'EOF'
-vehicle_from_camera: {height_m: 1.0, pitch_down_rad: 0.0}
-EOF
+conesight mount --camera cam.yaml --out mount.yaml frames/*.jpg
+grep -q "^vehicle_from_camera:" mount.yaml
 
 step "real frames, 3. predict --save on every frame: annotated frames and bird's-eye views"
 conesight predict --camera cam.yaml --extrinsics mount.yaml --save out/predict frames/*.jpg \
@@ -211,6 +212,16 @@ for line in lines:
         assert (c["range_m"] is None) == ("pnp_error" in c), c
 print(f"{frames} frames: {cones} cones, {unplaced} without a range; {2 * frames} PNGs in {sys.argv[2]}")
 assert cones >= 5 * frames, "the detector finds 9-13 cones per frame here"
+# With the mounting from the cones their bases stand on the road: the median base height in
+# every 10 m band out to 30 m within 0.1 m of it (a level camera 1 m high put them 0.5-2.2 m up).
+bands = {}
+for line in lines:
+    for c in line["cones"]:
+        if c["range_m"] is not None and c["range_m"] < 30:
+            bands.setdefault(int(c["range_m"] // 10), []).append(c["position_vehicle_m"][2])
+medians = {10 * b: sorted(z)[len(z) // 2] for b, z in sorted(bands.items())}
+print("median base height by range band: " + ", ".join(f"{b}-{b + 10} m {z:+.3f}" for b, z in medians.items()))
+assert set(medians) == {0, 10, 20} and all(abs(z) < 0.1 for z in medians.values()), medians
 EOF
 
 step "real frames, 7. record a run over the folder (it ends at the last image), replay it, diff"
@@ -226,6 +237,10 @@ timeout 300 conesight run --source folder:frames --camera-info cam.yaml --extrin
   || { echo "conesight run on the folder failed or did not end:" >&2; tail -n 20 run.log run.out >&2; exit 1; }
 cat run.out
 grep -q "^summary: $FRAMES frames with cones" run.out
+# The mounting is right: the run's mount check says nothing.
+if grep -q "^  mount:" run.out || grep -q "conesight mount" run.log; then
+  echo "the mount check fired with the mounting conesight mount wrote" >&2; exit 1
+fi
 ls out/drive1/frame_0000.png out/drive1/frame_0000_bev.png > /dev/null
 kill -INT "$RECORDER"
 wait "$RECORDER" || { echo "conesight record failed:" >&2; tail -n 20 record.log >&2; exit 1; }

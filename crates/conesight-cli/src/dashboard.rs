@@ -9,6 +9,11 @@
 //! (the frame of the latest cones annotated as every conesight frame is, `draw::annotate`:
 //! boxes in cone colour with class, score and range, keypoints, a cross where the range
 //! failed; JPEG, 960 px wide at most). The page polls `/api/state` four times a second.
+//!
+//! Mount check: the page shows a banner while the cone bases of the camera shown do not lie
+//! on the road of its extrinsics (`conesight_core::mount::MountCheck` over the cones it
+//! receives, the localiser's check; `mount` in `/api/state`), with the numbers and the
+//! `conesight mount` command that fixes it.
 
 use std::collections::VecDeque;
 use std::net::SocketAddr;
@@ -24,6 +29,7 @@ use axum::routing::get;
 use conesight_bus::zenoh::Session;
 use conesight_bus::zenoh::bytes::ZBytes;
 use conesight_bus::{Stream, Topics, ZenohArgs, declare_subscriber, decode};
+use conesight_core::mount::MountCheck;
 use conesight_pipeline::Shutdown;
 use conesight_proto::{ConeKeypoints, LocatedCone, pb};
 use image::RgbImage;
@@ -71,6 +77,21 @@ struct ConeView {
     ranging: String,
 }
 
+/// The mount check of the camera shown, once it holds enough cones.
+#[derive(Debug, Clone, Serialize)]
+struct MountView {
+    /// Cones in the check's window.
+    cones: usize,
+    /// Their bases' median height above the road of the extrinsics, metres.
+    median_height_m: f64,
+    /// The slope of that height with range, metres per metre (`null` when unknown).
+    slope: Option<f64>,
+    /// Off the road beyond the limits.
+    mismatch: bool,
+    /// The numbers in a sentence.
+    message: String,
+}
+
 /// What `/api/state` answers.
 #[derive(Debug, Clone, Default, Serialize)]
 struct Snapshot {
@@ -85,6 +106,7 @@ struct Snapshot {
     errors: u64,
     last_error: Option<String>,
     services: Vec<ServiceStatus>,
+    mount: Option<MountView>,
 }
 
 #[derive(Default)]
@@ -101,6 +123,8 @@ struct Inner {
     frames_bytes: usize,
     /// The annotated JPEG and the sequence it shows.
     jpeg: Option<(u64, Vec<u8>)>,
+    /// The mount check of each camera.
+    mount_checks: std::collections::BTreeMap<String, MountCheck>,
 }
 
 type Shared = Arc<Mutex<Inner>>;
@@ -268,7 +292,22 @@ fn on_cones(shared: &Shared, sample: &conesight_bus::zenoh::sample::Sample) {
     let now = Instant::now();
     let mut inner = lock(shared);
     inner.cone_times.push_back(now);
+    let check = inner
+        .mount_checks
+        .entry(header.camera_id.clone())
+        .or_default();
+    for cone in &located {
+        check.add(cone.estimate.range_m(), cone.position_in_vehicle.z);
+    }
+    let mount = check.status().map(|status| MountView {
+        cones: status.cones,
+        median_height_m: status.median_height_m,
+        slope: status.slope,
+        mismatch: status.mismatch,
+        message: status.describe(),
+    });
     let snapshot = &mut inner.snapshot;
+    snapshot.mount = mount;
     snapshot.camera = header.camera_id;
     snapshot.sequence = header.frame_sequence;
     snapshot.cones = views;

@@ -5,6 +5,8 @@
 //!   `make demo` runs it.
 //! - `predict`: the whole pipeline in-process on image files, JSON lines ([`predict`]).
 //! - `keypoints`: the keypoint network on cone crops, JSON lines ([`keypoints_cmd`]).
+//! - `mount`: the camera's pitch, roll and height from the cones in a few frames, written as
+//!   the extrinsics YAML ([`mount_cmd`]).
 //! - `demo`: the geometry demo and one rendered frame through keypoints + PnP ([`demo`]).
 //! - `sim`: the synthetic scene renderer ([`conesight_sim::cli`]).
 //! - `record`: the bus of a run into MCAP files ([`record_cmd`]).
@@ -32,6 +34,7 @@ mod flag_mentions;
 mod foxglove_view;
 mod job_cmd;
 mod keypoints_cmd;
+mod mount_cmd;
 mod predict;
 mod record_cmd;
 mod replay_cmd;
@@ -60,6 +63,9 @@ enum Command {
     Predict(predict::PredictArgs),
     /// The keypoint network on cone crops: one JSON object per crop on stdout.
     Keypoints(keypoints_cmd::KeypointsArgs),
+    /// The camera's pitch, roll and height above the road from the cones in a few frames:
+    /// writes the extrinsics YAML that `--extrinsics` reads, with each one's uncertainty.
+    Mount(mount_cmd::MountArgs),
     /// Demo: (1) a Formula Student track seen by the paper's camera, exact silhouette keypoints
     /// plus noise, solved by the cone PnP (bird's-eye PNG); (2) a rendered frame through the
     /// shipped keypoint network and the PnP (annotated PNG).
@@ -145,6 +151,7 @@ fn main() -> anyhow::Result<std::process::ExitCode> {
         Command::Run(args) => run::run(*args)?,
         Command::Predict(args) => predict::run(&args)?,
         Command::Keypoints(args) => keypoints_cmd::run(&args)?,
+        Command::Mount(args) => mount_cmd::run(&args)?,
         Command::Demo(args) => demo::run(&args)?,
         Command::Sim(args) => conesight_sim::cli::run(args)?,
         Command::Eval(args) => conesight_eval::cli::run(&args)?,

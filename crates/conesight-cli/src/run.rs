@@ -79,7 +79,10 @@ pub struct RunArgs {
     /// FileStorage or Kalibr camchain YAML; frames of another size are an error.
     #[arg(long = "camera-info")]
     camera_info: Option<PathBuf>,
-    /// Extrinsics YAML of that camera (`vehicle_from_camera`; default: 1 m high, level).
+    /// Extrinsics YAML of that camera (`vehicle_from_camera`, e.g. written by `conesight
+    /// mount`; default: 1 m high, level). With `--source synthetic` the mounting the localiser
+    /// assumes (the renderer keeps its own). The localiser checks that the cones stand on its
+    /// road and logs once when they do not.
     #[arg(long)]
     extrinsics: Option<PathBuf>,
     /// With `--source video:PATH` or `folder:DIR`: start again at the end of the file or
@@ -325,6 +328,7 @@ async fn run_async(args: RunArgs) -> anyhow::Result<()> {
                 let mut service = LocaliserArgs::new(common(name));
                 service.ground_plane = args.ground_plane;
                 service.cone_geometry = args.cone_geometry.clone();
+                service.extrinsics = args.extrinsics.clone();
                 tokio::spawn(async move {
                     conesight_localiser_service::run(&service, node, shutdown).await
                 })

@@ -201,6 +201,8 @@ impl Monitor {
         let mut keypoints_kept: BTreeMap<u64, Vec<ConeKeypoints>> = BTreeMap::new();
         let mut field_of_view: FieldOfView = None;
         let mut next_save = 0_u64;
+        // The localiser's mount check, seen from the cones, for the summary.
+        let mut mount_check = conesight_core::mount::MountCheck::default();
         let started = Instant::now();
         let mut tick = tokio::time::interval(Duration::from_secs(1));
         tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
@@ -237,6 +239,9 @@ impl Monitor {
                     let sequence = header.frame_sequence;
                     let latency_ms = now_ns().saturating_sub(header.acquisition_time_ns) as f64 / 1e6;
                     let cones = message.to_core().unwrap_or_default();
+                    for cone in &cones {
+                        mount_check.add(cone.estimate.range_m(), cone.position_in_vehicle.z);
+                    }
                     summary.outcomes.insert(sequence, outcome(&cones, watch.truth_of(sequence), latency_ms));
                     window.push(sequence);
                     last_output = Instant::now();
@@ -293,6 +298,7 @@ impl Monitor {
             }
         }
         summary.elapsed_secs = started.elapsed().as_secs_f64();
+        summary.mount = mount_check.status();
         if !window.is_empty() {
             print_row(summary.elapsed_secs, &summary, &window);
         }

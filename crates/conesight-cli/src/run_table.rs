@@ -49,6 +49,9 @@ pub struct Summary {
     pub save_errors: Vec<String>,
     /// Frames due to be saved while the writer was busy.
     pub save_skipped: u64,
+    /// Where the cone bases lay against the road of the extrinsics (the localiser's mount
+    /// check, seen from the cones), once enough cones came.
+    pub mount: Option<conesight_core::mount::MountCheckStatus>,
 }
 
 impl Summary {
@@ -224,6 +227,14 @@ impl Summary {
             fmt_opt(percentile(&latency, 99.0), 1),
             fmt_opt(percentile(&latency, 100.0), 1)
         );
+        if let Some(mount) = self.mount.filter(|m| m.mismatch) {
+            println!(
+                "  mount: {}: the extrinsics do not describe how the camera is mounted; estimate \
+                 the mounting with `conesight mount --camera CALIBRATION.yaml --out mount.yaml \
+                 FRAMES...` and pass --extrinsics mount.yaml",
+                mount.describe()
+            );
+        }
         if save_every == 0 {
             return;
         }

@@ -506,7 +506,8 @@ fn run_with_a_larger_cone_geometry_puts_cones_ten_percent_too_far() {
         let stdout = String::from_utf8_lossy(&output.stdout);
         let line = stdout
             .lines()
-            .find(|l| l.contains("% of range"))
+            // The summary's line (the table's legend names "% of range" too).
+            .find(|l| l.contains("position error median") && l.contains("% of range"))
             .unwrap_or_else(|| panic!("no error line in:\n{stdout}"));
         let before = line.split(" % of range").next().unwrap();
         before.rsplit('(').next().unwrap().trim().parse().unwrap()

@@ -2,8 +2,9 @@
 //! services and the page in one process), Chromium opened on the page and driven over the
 //! DevTools protocol. Two screenshots 1 s apart: the cone map is not empty in either and it
 //! changed; the DOM lists cones, a new frame sequence and the four services. And `conesight
-//! dashboard` fed cones by the test: the map reaches the farthest one. The screenshots are
-//! saved under `target/artefacts/`.
+//! dashboard` fed cones by the test: the map reaches the farthest one; a banner says when the
+//! cones do not stand on the road of the extrinsics (and only then). The screenshots are saved
+//! under `target/artefacts/`.
 #![allow(clippy::unwrap_used, clippy::expect_used, missing_docs)]
 
 mod common_process;
@@ -322,9 +323,19 @@ async fn dashboard_in_chromium_shows_cones_that_move() {
 /// A cone of `class` at (`x_m` ahead, `y_m` left) in the vehicle frame of the paper's mounting
 /// (1 m high, level), as the localiser publishes it.
 fn cone_at(class: conesight_core::ConeClass, x_m: f64, y_m: f64) -> conesight_proto::LocatedCone {
+    cone_at_height(class, x_m, y_m, 0.0)
+}
+
+/// [`cone_at`], its base `z_m` above the road.
+fn cone_at_height(
+    class: conesight_core::ConeClass,
+    x_m: f64,
+    y_m: f64,
+    z_m: f64,
+) -> conesight_proto::LocatedCone {
     use nalgebra::{Matrix3, Point3, Vector3};
     let estimate = conesight_core::pnp::ConeEstimate {
-        position_in_camera: Point3::new(-y_m, 1.0, x_m),
+        position_in_camera: Point3::new(-y_m, 1.0 - z_m, x_m),
         covariance_m2: Matrix3::from_diagonal(&Vector3::new(0.01, 0.01, 0.04)),
         axis_in_camera: Vector3::new(0.0, -1.0, 0.0),
         tilt_rad: 0.0,
@@ -473,5 +484,176 @@ async fn the_dashboard_map_follows_the_farthest_cone() {
         cone_pixels(&around) > 10,
         "no cone drawn where the cone at 70 m belongs: {seen}"
     );
+    session.close().await.unwrap();
+}
+
+/// Issue 39, a wrong mount gives nonsense in silence: `conesight dashboard` fed cones standing
+/// on the road shows no mount banner; fed cones floating 0.5 m above it (the bases of a camera
+/// mounted otherwise than its extrinsics say), it shows the banner with the numbers and the
+/// `conesight mount` command, drawn on the page.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_dashboard_shows_a_banner_when_the_cones_float() {
+    use conesight_bus::{Stream, Topics, ZenohArgs, encode, open_session};
+    let Some(chromium) = chromium() else {
+        return;
+    };
+    let dir = TempDir::new("dashboard-mount");
+    let namespace = format!("mount{}", std::process::id());
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let port = free_port();
+    let addr = format!("127.0.0.1:{port}");
+    let _dashboard = common_process::Process::start(
+        "dashboard",
+        &[
+            "dashboard",
+            "--namespace",
+            &namespace,
+            "--zenoh-listen",
+            &endpoint,
+            "--dashboard-addr",
+            &addr,
+        ],
+        &dir.join("dashboard.log"),
+    );
+    let args = ZenohArgs {
+        connect: vec![endpoint],
+        listen: vec!["tcp/127.0.0.1:0".to_owned()],
+        namespace,
+        ..ZenohArgs::default()
+    };
+    let session = open_session(&args).await.unwrap();
+    let topics = Topics::from_args(&args).unwrap();
+    let key = topics.key("front", Stream::Cones).unwrap();
+    // 20 cones a frame, 4-25 m ahead on both sides, their bases `lift_m` above the road.
+    let frame = |lift_m: f64| -> Vec<conesight_proto::LocatedCone> {
+        (0..20)
+            .map(|i| {
+                let side = if i % 2 == 0 { 1.6 } else { -1.6 };
+                let class = if i % 2 == 0 {
+                    conesight_core::ConeClass::Blue
+                } else {
+                    conesight_core::ConeClass::Yellow
+                };
+                cone_at_height(class, 4.0 + f64::from(i), side, lift_m)
+            })
+            .collect()
+    };
+    let lift = std::sync::Arc::new(std::sync::Mutex::new(0.0_f64));
+    let publisher = tokio::spawn({
+        let (session, lift) = (session.clone(), lift.clone());
+        async move {
+            for sequence in 0.. {
+                let header = conesight_proto::pb::Header::new(
+                    "front",
+                    sequence,
+                    conesight_proto::now_ns(),
+                    "front_optical",
+                );
+                let cones = frame(*lift.lock().unwrap());
+                let message = conesight_proto::pb::Cones::new_stamped(header, &cones);
+                let _ = session.put(key.clone(), encode(&message)).await;
+                tokio::time::sleep(Duration::from_millis(100)).await;
+            }
+        }
+    });
+    let mount_state = || {
+        http_get(port, "/api/state")
+            .and_then(|body| serde_json::from_str::<Value>(&body).ok())
+            .map_or(Value::Null, |state| state["mount"].clone())
+    };
+    let started = Instant::now();
+    let on_road = loop {
+        let mount = mount_state();
+        if mount["cones"].as_u64().unwrap_or(0) >= 100 {
+            break mount;
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(60),
+            "no mount check on /api/state: {mount}"
+        );
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    };
+    assert_eq!(on_road["mismatch"], false, "{on_road}");
+
+    let (mut browser, mut socket) = open_page(chromium, &addr, &dir).await;
+    let banner = r#"JSON.stringify({
+        cones: Number(document.getElementById("cone-count").textContent),
+        mismatch: document.body.dataset.mountMismatch || null,
+        hidden: document.getElementById("mount-banner").hidden,
+        text: document.getElementById("mount-banner").textContent,
+        rect: (() => { const r = document.getElementById("mount-banner").getBoundingClientRect();
+                       return [r.x, r.y, r.width, r.height].map(Math.round); })() })"#;
+    let mut id = 0;
+    let read = |value: Value| -> Value {
+        value
+            .as_str()
+            .and_then(|text| serde_json::from_str(text).ok())
+            .unwrap_or(Value::Null)
+    };
+    let quiet = loop {
+        id += 1;
+        let seen = read(eval(&mut socket, id, banner).await);
+        if seen["cones"] == 20 && seen["mismatch"] == "false" {
+            break seen;
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(120),
+            "the page never showed the cones on the road: {seen}"
+        );
+        tokio::time::sleep(Duration::from_millis(250)).await;
+    };
+    assert_eq!(
+        quiet["hidden"], true,
+        "a banner for cones on the road: {quiet}"
+    );
+
+    // The camera is mounted otherwise: the bases float 0.5 m above the road.
+    *lift.lock().unwrap() = 0.5;
+    let shown = loop {
+        id += 1;
+        let seen = read(eval(&mut socket, id, banner).await);
+        // Once the check's window holds only floating cones.
+        if seen["hidden"] == false && seen["text"].as_str().is_some_and(|t| t.contains("+0.50 m")) {
+            break seen;
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(180),
+            "no banner for floating cones: {seen} (api: {})",
+            mount_state()
+        );
+        tokio::time::sleep(Duration::from_millis(250)).await;
+    };
+    // Drawn: the next state poll has painted it.
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    id += 1;
+    let png = screenshot(&mut socket, id).await;
+    let _ = browser.kill();
+    let _ = browser.wait();
+    publisher.abort();
+    let artefacts = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .parent()
+        .unwrap()
+        .join("artefacts");
+    std::fs::create_dir_all(&artefacts).unwrap();
+    std::fs::write(artefacts.join("dashboard-mount.png"), &png).unwrap();
+    eprintln!("mount banner: {shown}");
+    let text = shown["text"].as_str().unwrap();
+    assert!(
+        text.contains("+0.50 m") && text.contains("conesight mount --camera"),
+        "{text}"
+    );
+    let rect: Vec<u32> = shown["rect"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| u32::try_from(v.as_i64().unwrap()).unwrap())
+        .collect();
+    assert!(rect[2] > 300 && rect[3] > 20, "banner box {rect:?}");
+    // The banner's amber background is on the screenshot.
+    let amber = crop(&png, [rect[0], rect[1], rect[2], rect[3]])
+        .pixels()
+        .filter(|p| p.0 == [0xff, 0xf3, 0xcd])
+        .count();
+    assert!(amber > 1000, "{amber} banner pixels");
     session.close().await.unwrap();
 }

@@ -126,3 +126,51 @@ pub enum GeometryError {
         reason: &'static str,
     },
 }
+
+/// The camera's mounting could not be estimated from the cones ([`crate::mount`]).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum MountError {
+    /// Too few cones were placed to fit the road plane.
+    #[error(
+        "{placed} cones placed within {max_range_m} m in {frames} frames, at least {needed} \
+         needed to find the road; give more frames, with cones near the camera on both sides"
+    )]
+    TooFewCones {
+        /// Cones the PnP placed within the range used.
+        placed: usize,
+        /// Least number needed.
+        needed: usize,
+        /// Frames given.
+        frames: usize,
+        /// Cones farther than this are not used, metres.
+        max_range_m: f64,
+    },
+    /// No plane below the camera fits enough cone bases.
+    #[error(
+        "the cone bases fit no road plane: the best plane holds {inliers} of {placed} bases, \
+         {needed} needed (the cones may not stand on one flat road, or the calibration is wrong)"
+    )]
+    NoPlane {
+        /// Bases on the best plane.
+        inliers: usize,
+        /// Bases placed.
+        placed: usize,
+        /// Least number needed.
+        needed: usize,
+    },
+    /// The bases fix no plane: they lie along one line, or too few are near.
+    #[error(
+        "the cone bases do not fix the road plane (pitch +-{pitch_sigma_deg:.1} deg, roll \
+         +-{roll_sigma_deg:.1} deg): they lie along one line; give frames with cones on both \
+         sides of the car and at several ranges"
+    )]
+    Degenerate {
+        /// Standard deviation of the pitch, degrees.
+        pitch_sigma_deg: f64,
+        /// Standard deviation of the roll, degrees.
+        roll_sigma_deg: f64,
+    },
+    /// A cone solver could not be set up.
+    #[error("setting up the cone solver: {0}")]
+    Solver(#[from] GeometryError),
+}

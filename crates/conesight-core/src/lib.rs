@@ -10,6 +10,9 @@
 //!   silhouette keypoints of a cone seen from a camera.
 //! - [`pnp`]: the cone-specific PnP solver with covariance, and a generic PnP
 //!   (EPnP + Levenberg-Marquardt + RANSAC) used as a fallback and cross-check.
+//! - [`mount`]: the camera's pitch, roll and height from the cones of a few frames
+//!   ([`mount::estimate_mount`]), and the run-time check that the cones stand on the road of
+//!   the extrinsics ([`mount::MountCheck`]).
 //!
 //! Frames: the camera frame is OpenCV's (x right, y down, z forward); the vehicle frame is
 //! ROS REP-103 (x forward, y left, z up). Transforms are named `target_from_source`.
@@ -18,6 +21,7 @@
 pub mod camera;
 pub mod cone;
 pub mod error;
+pub mod mount;
 pub mod pnp;
 
 pub use camera::{Camera, Distortion, DistortionModel, Extrinsics};
@@ -25,5 +29,5 @@ pub use cone::{
     CR3D, ConeClass, ConeGeometry, ConeModel, KEYPOINT_COUNT, Keypoint, cross_ratio,
     silhouette_keypoints,
 };
-pub use error::{ConfigError, GeometryError};
+pub use error::{ConfigError, GeometryError, MountError};
 pub use pnp::{ConeEstimate, ConeObservation, ConePnpParams, ConeSolver, solve_cone};

@@ -341,6 +341,8 @@ struct FrameContext<'a> {
     f_px: f64,
 }
 
+// One record's fields, each from a different stage; bundling them would only rename them.
+#[allow(clippy::too_many_arguments)]
 fn record(
     context: &FrameContext,
     boxes: &'static str,

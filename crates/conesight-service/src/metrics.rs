@@ -16,6 +16,10 @@
 //! | `conesight_detector_coverage_ratio` | gauge | (detector) share of the frame it covers |
 //! | `conesight_cones_published_total` | counter | `class` (localiser) |
 //! | `conesight_input_age_seconds` | gauge | seconds since the latest input (since start before the first) |
+//! | `conesight_mount_mismatch` | gauge | (localiser) 1 while the cone bases do not lie on the road of the extrinsics, else 0 |
+//! | `conesight_mount_base_height_meters` | gauge | (localiser) median height of recent cone bases (within 30 m) above that road |
+//! | `conesight_mount_height_slope_ratio` | gauge | (localiser) their height's slope with range, metres per metre |
+//! | `conesight_mount_check_cones` | gauge | (localiser) cones the mount check holds (it judges from 30) |
 //! | `conesight_zenoh_refused_messages_total` | counter | messages Zenoh refused over its receive limit, in this process ([`crate::refusals`]) |
 //! | `conesight_build_info` | gauge (1) | `version`, `git_revision`, `model`, `model_sha256` |
 //!
@@ -72,6 +76,10 @@ pub struct Metrics {
     source_restarts: Counter,
     cones_published: Family<OneLabel, Counter>,
     input_age: Gauge<f64, AtomicU64>,
+    mount_mismatch: Gauge,
+    mount_base_height: Gauge<f64, AtomicU64>,
+    mount_height_slope: Gauge<f64, AtomicU64>,
+    mount_check_cones: Gauge,
     build_info: Family<Vec<(&'static str, String)>, Gauge>,
     zenoh_refused: Counter,
     zenoh_refused_seen: AtomicU64,
@@ -132,6 +140,30 @@ impl Metrics {
         let source_restarts = Counter::default();
         let cones_published = Family::<OneLabel, Counter>::default();
         let input_age = Gauge::<f64, AtomicU64>::default();
+        let mount_mismatch = Gauge::default();
+        let mount_base_height = Gauge::<f64, AtomicU64>::default();
+        let mount_height_slope = Gauge::<f64, AtomicU64>::default();
+        let mount_check_cones = Gauge::default();
+        registry.register(
+            "mount_mismatch",
+            "1 while the cone bases do not lie on the road of the extrinsics (their median height or its slope with range beyond the limits), else 0 (localiser)",
+            mount_mismatch.clone(),
+        );
+        registry.register(
+            "mount_base_height_meters",
+            "Median height of the recent cone bases within 30 m above the road of the extrinsics (localiser)",
+            mount_base_height.clone(),
+        );
+        registry.register(
+            "mount_height_slope_ratio",
+            "Slope of the recent cone bases' height with range, metres per metre (localiser)",
+            mount_height_slope.clone(),
+        );
+        registry.register(
+            "mount_check_cones",
+            "Cones the mount check holds (localiser)",
+            mount_check_cones.clone(),
+        );
         let build_info = Family::<Vec<(&'static str, String)>, Gauge>::default();
         let zenoh_refused = Counter::default();
         registry.register(
@@ -226,6 +258,10 @@ impl Metrics {
             source_restarts,
             cones_published,
             input_age,
+            mount_mismatch,
+            mount_base_height,
+            mount_height_slope,
+            mount_check_cones,
             build_info,
             zenoh_refused,
             zenoh_refused_seen: AtomicU64::new(0),
@@ -249,6 +285,23 @@ impl Metrics {
     /// Sets the age of the latest input, seconds.
     pub fn set_input_age(&self, seconds: f64) {
         self.input_age.set(seconds);
+    }
+
+    /// Sets what the mount check sees: the cones it holds, their bases' median height above
+    /// the road of the extrinsics and its slope with range (0 when unknown), and whether that
+    /// is a mismatch.
+    pub fn set_mount_check(
+        &self,
+        cones: usize,
+        median_height_m: f64,
+        slope: Option<f64>,
+        mismatch: bool,
+    ) {
+        self.mount_check_cones
+            .set(i64::try_from(cones).unwrap_or(i64::MAX));
+        self.mount_base_height.set(median_height_m);
+        self.mount_height_slope.set(slope.unwrap_or(0.0));
+        self.mount_mismatch.set(i64::from(mismatch));
     }
 
     /// Replaces `conesight_build_info` (one series, value 1).
@@ -445,6 +498,7 @@ mod tests {
         metrics.cones_published("blue", 3);
         metrics.cones_published("yellow", 1);
         metrics.set_input_age(0.25);
+        metrics.set_mount_check(42, 0.5, Some(0.02), true);
         metrics.set_build_info(&BuildInfo {
             version: "0.1.0".into(),
             git_revision: "abc".into(),
@@ -462,6 +516,10 @@ mod tests {
             "conesight_cones_published_total{service=\"localiser\",camera=\"front\",class=\"blue\"} 3",
             "conesight_cones_published_total{service=\"localiser\",camera=\"front\",class=\"yellow\"} 1",
             "conesight_input_age_seconds{service=\"localiser\",camera=\"front\"} 0.25",
+            "conesight_mount_mismatch{service=\"localiser\",camera=\"front\"} 1",
+            "conesight_mount_base_height_meters{service=\"localiser\",camera=\"front\"} 0.5",
+            "conesight_mount_height_slope_ratio{service=\"localiser\",camera=\"front\"} 0.02",
+            "conesight_mount_check_cones{service=\"localiser\",camera=\"front\"} 42",
             "conesight_build_info{service=\"localiser\",camera=\"front\",version=\"0.1.0\",git_revision=\"abc\",model=\"keypoints.onnx\",model_sha256=\"00ff\"} 1",
             "conesight_frames_received_total{service=\"localiser\",camera=\"front\"} 0",
         ] {

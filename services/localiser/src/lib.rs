@@ -9,6 +9,14 @@
 //! The extrinsics come from `--extrinsics` when given, else from the camera info; without
 //! either the paper's mounting is used and the error kind `no_extrinsics` is counted.
 //!
+//! Mount check: the bases of the cones it places should lie on the road of the extrinsics.
+//! Over the last 200 cones within 30 m ([`conesight_core::mount::MountCheck`]) their median
+//! height off the road (beyond 0.15 m: a wrong camera height) or its slope with range (beyond
+//! 1 cm per metre: a wrong pitch) is a mismatch: logged once with the numbers and the command
+//! that fixes it (`conesight mount`), and `conesight_mount_mismatch` is 1 while it lasts (the
+//! numbers in `conesight_mount_*`). New extrinsics start the check again. Not with
+//! `--ground-plane`, which puts every base on that road.
+//!
 //! Entry point: [`run`].
 
 use std::path::PathBuf;
@@ -17,6 +25,7 @@ use std::time::{Duration, Instant};
 
 use conesight_bus::zenoh::sample::Sample;
 use conesight_bus::{Stream, encode};
+use conesight_core::mount::{MountCheck, MountCheckStatus};
 use conesight_core::{ConeGeometry, Extrinsics};
 use conesight_pipeline::node::{CalibrationCell, CommonArgs, follow_camera_info};
 use conesight_pipeline::{LocaliserStage, Node, Shutdown};
@@ -79,6 +88,11 @@ pub async fn run(args: &LocaliserArgs, node: Node, shutdown: Shutdown) -> anyhow
     let mut stage: Option<LocaliserStage> = None;
     let mut calibrated_size_px = (0_u32, 0_u32);
     let mut missing_extrinsics = false;
+    let mut mount_check = MountCheck::default();
+    let extrinsics_source = match &args.extrinsics {
+        Some(path) => format!("--extrinsics {}", path.display()),
+        None => "the camera info".to_owned(),
+    };
     let worker = Worker::spawn("localiser", node.metrics.clone(), move |sample: Sample| {
         let node = &worker_node;
         let started = Instant::now();
@@ -100,6 +114,7 @@ pub async fn run(args: &LocaliserArgs, node: Node, shutdown: Shutdown) -> anyhow
             let extrinsics = fixed_extrinsics.or(extrinsics);
             missing_extrinsics = extrinsics.is_none();
             calibrated_size_px = (camera.width_px, camera.height_px);
+            mount_check.reset();
             match LocaliserStage::new(
                 &camera,
                 &extrinsics.unwrap_or_else(Extrinsics::paper_default),
@@ -152,6 +167,23 @@ pub async fn run(args: &LocaliserArgs, node: Node, shutdown: Shutdown) -> anyhow
             return;
         }
         let located: Vec<_> = output.cones.into_iter().map(|(_, cone)| cone).collect();
+        if !ground_plane {
+            for cone in &located {
+                mount_check.add(cone.estimate.range_m(), cone.position_in_vehicle.z);
+            }
+            let (status, first) = mount_check.update();
+            if let Some(status) = status {
+                node.metrics.set_mount_check(
+                    status.cones,
+                    status.median_height_m,
+                    status.slope,
+                    status.mismatch,
+                );
+            }
+            if let (Some(status), true) = (status, first) {
+                warn_mount_mismatch(&status, &extrinsics_source);
+            }
+        }
         let message = pb::Cones::new_stamped(header, &located);
         node.metrics
             .observe_stage("end_to_end", Duration::from_nanos(message.latency_ns));
@@ -186,6 +218,21 @@ pub async fn run(args: &LocaliserArgs, node: Node, shutdown: Shutdown) -> anyhow
         anyhow::bail!("the localiser worker panicked");
     }
     Ok(())
+}
+
+/// The one warning of a mount mismatch: the numbers and the command that fixes it.
+fn warn_mount_mismatch(status: &MountCheckStatus, extrinsics_source: &str) {
+    tracing::warn!(
+        cones = status.cones,
+        median_height_m = status.median_height_m,
+        slope = status.slope,
+        "{}: the extrinsics ({extrinsics_source}) do not describe how the camera is mounted \
+         (ranges and vehicle-frame positions are off with it). Estimate the mounting from a few \
+         frames of this camera with cones on a flat road: `conesight mount --camera \
+         CALIBRATION.yaml --out mount.yaml FRAMES...`, then pass --extrinsics mount.yaml \
+         (logged once; conesight_mount_mismatch is 1 while it lasts)",
+        status.describe()
+    );
 }
 
 /// The `conesight-localiser` command line.

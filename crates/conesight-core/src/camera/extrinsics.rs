@@ -17,6 +17,9 @@
 //! ```yaml
 //! vehicle_from_camera: {height_m: 1.0, pitch_down_rad: 0.02}
 //! ```
+//!
+//! Other top-level keys are ignored, such as the `mount_uncertainty` block that `conesight
+//! mount` writes beside `vehicle_from_camera` (`crate::mount::MountEstimate::to_yaml`).
 
 use std::path::Path;
 
@@ -168,7 +171,7 @@ impl Extrinsics {
     }
 }
 
-/// An extrinsics file (module docs).
+/// An extrinsics file (module docs); other top-level keys are ignored.
 #[derive(Debug, Deserialize)]
 struct ExtrinsicsFile {
     vehicle_from_camera: PoseFile,

@@ -218,7 +218,7 @@ fn levelled_box_distance(
     let mut lo = floor + 1e-9;
     let mut hi = floor + big_h / height + c * p / big_h + 1.0;
     while residual(hi) > 0.0 {
-        hi = 2.0 * hi;
+        hi *= 2.0;
     }
     let mut d = (big_h / height + c * p / big_h).clamp(lo, hi);
     for _ in 0..60 {

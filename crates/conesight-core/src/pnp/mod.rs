@@ -35,8 +35,8 @@ pub use epnp::epnp;
 pub use generic::{PnpSolution, solve_pnp};
 pub use lm::{LmParams, RefinedPose, refine_pose};
 pub use params::{
-    CAUCHY_SCALE_SIGMAS, ConeEstimate, ConeObservation, ConePnpParams, DEFAULT_KEYPOINT_SIGMA_PX,
-    GroundPlane, OUTLIER_THRESHOLD_SIGMAS,
+    CAUCHY_SCALE_SIGMAS, ConeEstimate, ConeObservation, ConePnpParams, DEFAULT_CAMERA_HEIGHT_M,
+    DEFAULT_KEYPOINT_SIGMA_PX, GroundPlane, OUTLIER_THRESHOLD_SIGMAS,
 };
 pub use ransac::{RansacParams, solve_pnp_ransac};
 pub use robust::RobustLoss;
