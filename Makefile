@@ -107,12 +107,14 @@ REPORT_MODELS := --keypoint-model production=models/keypoints.onnx \
 	--keypoint-model baseline=models/keypoints-baseline.onnx,build/train/keypoints-baseline/best.pt \
 	--keypoint-model no_cross_ratio=models/keypoints-no-cr.onnx,build/train/keypoints-no-cr/best.pt
 .PHONY: eval eval-check
+# The real FSOCO splits, ranged by each cue (section 3b), when ../shared is there.
+REAL_BOXES := $(if $(wildcard ../shared/data/real-train/fsoco-boxes/data.yaml),--real-boxes ../shared/data/real-train/fsoco-boxes,)
 
 eval: setup
 	@start=$$(date +%s); set -e; \
 	cargo build --release -p conesight-eval; \
 	./target/release/conesight-eval --out build/eval --patches-out build/eval/patches \
-	  $(EVAL_MODELS) --detector models/detector.onnx; \
+	  $(EVAL_MODELS) --detector models/detector.onnx $(REAL_BOXES); \
 	PYTHONPATH=training $(PY) -m conesight_train.report --records build/eval --docs docs \
 	  --synthetic-patches build/eval/patches $(REPORT_MODELS) \
 	  --command "make eval" --started-at $$start; \

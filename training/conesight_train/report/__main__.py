@@ -340,6 +340,7 @@ def main(argv: list[str] | None = None) -> int:
         default=[
             REPO_ROOT.parent / "shared/data/real-dev/fsoco-keypoint-crops",
             REPO_ROOT.parent / "shared/data/real-train/amz-keypoint-crops-hires",
+            REPO_ROOT.parent / "shared/data/real-train/tuwr-keypoint-crops",
         ],
         help="real keypoint crop folders; their validation split (by source frame) is used",
     )

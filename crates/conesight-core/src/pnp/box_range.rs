@@ -42,6 +42,10 @@ pub const PLATE_NEAREST_EDGE_SPREAD: f64 = 0.1245;
 /// standard deviations of their difference: a tilted cone, one hidden in part by another, or
 /// a large cone classed as small has a box that lies, and the keypoints carry it.
 pub const BOX_GATE_SIGMAS: f64 = 3.0;
+/// A box against the image's left or right edge narrower than this share of its height shows
+/// a sliver of a cone (a whole cone's box is about 0.85 as wide as tall): most of it is out of
+/// the image, and neither its box nor its keypoints place it.
+pub const SLIVER_ASPECT: f64 = 0.4;
 /// A box edge within this many pixels of the image's top or bottom edge is taken as cut there.
 pub const EDGE_MARGIN_PX: f64 = 1.0;
 /// Mean distance of a square plate's nearest edge from its centre, in half widths, over a
@@ -382,8 +386,20 @@ pub fn locate_cone(
         )
         .ok()
     });
-    // A cone whose axis the keypoints put outside the image is more than half cut off: what
-    // shows is a sliver, and neither its box nor its keypoints say where it stands.
+    // A cone whose axis the keypoints put outside the image, or whose box is a sliver against
+    // the image's side, is more than half cut off: neither its box nor its keypoints say where
+    // it stands.
+    if let Some(b) = cone_box {
+        let at_side = b.x_min_px <= EDGE_MARGIN_PX
+            || b.x_max_px >= f64::from(solver.camera.width_px) - EDGE_MARGIN_PX;
+        let (w, h) = (b.x_max_px - b.x_min_px, b.y_max_px - b.y_min_px);
+        if at_side && w < SLIVER_ASPECT * h {
+            return Err(GeometryError::SolverFailed {
+                reason: "the box is a sliver against the image's side: most of the cone is cut \
+                         off by the image's edge",
+            });
+        }
+    }
     let k = &observation.keypoints_px;
     let axis_x = (k[0].x + 0.5 * (k[3].x + k[6].x)) / 2.0;
     if axis_x.is_finite() && !(0.0..=f64::from(solver.camera.width_px)).contains(&axis_x) {
@@ -423,7 +439,12 @@ pub fn locate_cone(
     }
 }
 
-/// A keypoint-only estimate, refused when it does not cover the cone's own visible box.
+/// Least share of the cone's whole projection that must lie in the image for its keypoints
+/// alone to place it.
+pub const MIN_SHARE_IN_IMAGE: f64 = 0.5;
+
+/// A keypoint-only estimate, refused when it does not cover the cone's own visible box, or
+/// when less than [`MIN_SHARE_IN_IMAGE`] of the cone it places would be in the image.
 fn keypoints_alone(
     solver: &ConeSolver,
     model: &ConeModel,
@@ -431,6 +452,21 @@ fn keypoints_alone(
     cone_box: Option<&ConeBox>,
     ranging: Ranging,
 ) -> Result<(ConeEstimate, Ranging), GeometryError> {
+    let camera = &solver.camera;
+    if let Some(whole) = projected_box(camera, model, &estimate) {
+        let inside = |lo: f64, hi: f64, size: u32| {
+            let span = (hi - lo).max(1e-9);
+            ((hi.min(f64::from(size)) - lo.max(0.0)).max(0.0)) / span
+        };
+        let share = inside(whole.x_min_px, whole.x_max_px, camera.width_px)
+            * inside(whole.y_min_px, whole.y_max_px, camera.height_px);
+        if share < MIN_SHARE_IN_IMAGE {
+            return Err(GeometryError::SolverFailed {
+                reason: "the keypoints place a cone mostly outside the image: too little of it \
+                         shows to range it",
+            });
+        }
+    }
     match cone_box {
         Some(visible) if !covers_box(&solver.camera, model, &estimate, visible) => {
             Err(GeometryError::SolverFailed {
