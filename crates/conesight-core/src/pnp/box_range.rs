@@ -46,6 +46,11 @@ pub const BOX_GATE_SIGMAS: f64 = 3.0;
 /// a sliver of a cone (a whole cone's box is about 0.85 as wide as tall): most of it is out of
 /// the image, and neither its box nor its keypoints place it.
 pub const SLIVER_ASPECT: f64 = 0.4;
+/// A box against the image's left or right edge wider than this share of its height is no
+/// standing cone's (a whole one's, base plate at 45 degrees of yaw, is at most about 1.0; the
+/// widest of 58 rendered cones cut at the side by at most half was 1.04): a corner of a base
+/// plate whose cone the edge cuts off.
+pub const CORNER_ASPECT: f64 = 1.15;
 /// A box edge within this many pixels of the image's top or bottom edge is taken as cut there.
 pub const EDGE_MARGIN_PX: f64 = 1.0;
 /// Mean distance of a square plate's nearest edge from its centre, in half widths, over a
@@ -362,6 +367,42 @@ pub fn covers_box(
         && visible.y_max_px <= whole.y_max_px + slack_y
 }
 
+/// True unless `visible` is cut by an edge of the image and the cone `estimate` places ends
+/// short of that edge (by more than a tenth of the visible box's size along it and 2 px), or,
+/// cut at the side, is shorter than the visible box by as much: a cone an edge cuts reaches
+/// past it, and the side's cut leaves its height. Keypoints on a sliver of a cone (its apex at the image's
+/// bottom, a corner of its base plate at the side) fit a whole small cone inside the sliver,
+/// many times too far.
+pub fn reaches_cut_edge(
+    camera: &Camera,
+    model: &ConeModel,
+    estimate: &ConeEstimate,
+    visible: &ConeBox,
+) -> bool {
+    let (width, height) = (f64::from(camera.width_px), f64::from(camera.height_px));
+    let cut_left = visible.x_min_px <= EDGE_MARGIN_PX;
+    let cut_right = visible.x_max_px >= width - EDGE_MARGIN_PX;
+    let cut_top = visible.y_min_px <= EDGE_MARGIN_PX;
+    let cut_bottom = visible.y_max_px >= height - EDGE_MARGIN_PX;
+    if !(cut_left || cut_right || cut_top || cut_bottom) {
+        return true;
+    }
+    let Some(whole) = projected_box(camera, model, estimate) else {
+        return false;
+    };
+    let slack_x = 0.1 * (visible.x_max_px - visible.x_min_px) + 2.0;
+    let slack_y = 0.1 * (visible.y_max_px - visible.y_min_px) + 2.0;
+    // A cone the image's side cuts still shows its whole height: the estimate must span it.
+    let spans_height = !(cut_left || cut_right)
+        || (whole.y_min_px <= visible.y_min_px + slack_y
+            && whole.y_max_px >= visible.y_max_px - slack_y);
+    spans_height
+        && (!cut_left || whole.x_min_px <= slack_x)
+        && (!cut_right || whole.x_max_px >= width - slack_x)
+        && (!cut_top || whole.y_min_px <= slack_y)
+        && (!cut_bottom || whole.y_max_px >= height - slack_y)
+}
+
 /// One cone as the localiser ranges it: keypoint PnP (its covariance widened by the keypoints'
 /// common-mode and scale errors, [`super::add_common_mode`], [`super::add_scale_error`]) with
 /// the box-height depth fused in when `cone_box` gives one and agrees within
@@ -399,6 +440,13 @@ pub fn locate_cone(
                          off by the image's edge",
             });
         }
+        if at_side && w > CORNER_ASPECT * h {
+            return Err(GeometryError::SolverFailed {
+                reason: "the box against the image's side is wider than a standing cone's: a \
+                         corner of its base plate, the rest of the cone cut off by the image's \
+                         edge",
+            });
+        }
     }
     let k = &observation.keypoints_px;
     let axis_x = (k[0].x + 0.5 * (k[3].x + k[6].x)) / 2.0;
@@ -412,6 +460,14 @@ pub fn locate_cone(
         let e = super::add_common_mode(&e, observation, &solver.camera, reference_sigma_px);
         super::add_scale_error(&e, observation)
     });
+    if let (Ok(estimate), Some(visible)) = (&solved, cone_box)
+        && !reaches_cut_edge(&solver.camera, model, estimate, visible)
+    {
+        return Err(GeometryError::SolverFailed {
+            reason: "the box is cut by the image's edge but the keypoints place a whole cone \
+                     inside it (a sliver of a cone: too little of it shows to range it)",
+        });
+    }
     match (solved, depth) {
         (Ok(estimate), Some(depth)) => {
             let innovation = depth.depth_m - estimate.position_in_camera.z;
@@ -654,6 +710,57 @@ mod tests {
             locate_cone(&solver, &model, &observation, Some(&short), 1.0).unwrap();
         assert_eq!(ranging, Ranging::KeypointsBoxRefused);
         assert_relative_eq!(alone.position_in_camera.z, 10.0, max_relative = 0.01);
+    }
+
+    #[test]
+    fn a_sliver_cut_by_an_image_edge_gives_no_range_a_cut_cone_does() {
+        let model = ConeModel::small();
+        let bottom = f64::from(camera().height_px);
+        // 2.3 m ahead of a camera 1 m up: the image's bottom edge cuts the cone's lower part.
+        let (solver, observation) = exact_cone(2.3, 0.0);
+        let estimate = solver.solve(&observation).unwrap();
+        let mut cut = projected_box(&camera(), &model, &estimate).unwrap();
+        assert!(cut.y_max_px > bottom, "{cut:?}");
+        cut.y_max_px = bottom;
+        assert!(reaches_cut_edge(&camera(), &model, &estimate, &cut));
+        let (placed, ranging) =
+            locate_cone(&solver, &model, &observation, Some(&cut), 1.0).unwrap();
+        assert_eq!(ranging, Ranging::Keypoints);
+        assert_relative_eq!(placed.position_in_camera.z, 2.3, max_relative = 0.01);
+        // Keypoints of a whole cone at 30 m in a box the bottom edge cuts (an apex's sliver).
+        let (solver, observation) = exact_cone(30.0, 0.0);
+        let estimate = solver.solve(&observation).unwrap();
+        let whole = projected_box(&camera(), &model, &estimate).unwrap();
+        let sliver = ConeBox {
+            y_min_px: bottom - 1.2 * (whole.y_max_px - whole.y_min_px),
+            y_max_px: bottom,
+            ..whole
+        };
+        assert!(!reaches_cut_edge(&camera(), &model, &estimate, &sliver));
+        let error = locate_cone(&solver, &model, &observation, Some(&sliver), 1.0).unwrap_err();
+        assert!(error.to_string().contains("sliver"), "{error}");
+        // Cut by the image's right edge: placed. Keypoints of a cone twice as far in that box
+        // (a whole small cone fitted to the visible part): no range.
+        let (solver, observation) = exact_cone(10.0, 6.8);
+        let estimate = solver.solve(&observation).unwrap();
+        let mut side = projected_box(&camera(), &model, &estimate).unwrap();
+        let right = f64::from(camera().width_px);
+        assert!(side.x_max_px > right, "{side:?}");
+        side.x_max_px = right - 0.5;
+        let (placed, _) = locate_cone(&solver, &model, &observation, Some(&side), 1.0).unwrap();
+        assert_relative_eq!(placed.position_in_camera.z, 10.0, max_relative = 0.01);
+        let (solver, observation) = exact_cone(20.0, 13.6);
+        let error = locate_cone(&solver, &model, &observation, Some(&side), 1.0).unwrap_err();
+        assert!(error.to_string().contains("sliver"), "{error}");
+        // A base plate's corner at the image's left edge: twice as wide as tall.
+        let corner = ConeBox {
+            x_min_px: 0.0,
+            y_min_px: 700.0,
+            x_max_px: 20.0,
+            y_max_px: 710.0,
+        };
+        let error = locate_cone(&solver, &model, &observation, Some(&corner), 1.0).unwrap_err();
+        assert!(error.to_string().contains("corner"), "{error}");
     }
 
     #[test]

@@ -25,7 +25,7 @@ mod silhouette_jacobian;
 
 pub use box_range::{
     BOX_GATE_SIGMAS, BOX_RANGE_RELATIVE_SIGMA, BoxDepth, ConeBox, Ranging, box_depth, box_estimate,
-    covers_box, fuse_box_depth, locate_cone, projected_box,
+    covers_box, fuse_box_depth, locate_cone, projected_box, reaches_cut_edge,
 };
 pub use common_mode::{
     COMMON_MODE_SIGMA_FRACTION, add_common_mode, add_scale_error, keypoint_scale_sigma,
