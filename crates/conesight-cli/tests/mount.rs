@@ -79,11 +79,6 @@ fn mount_recovers_the_rendered_mounting() {
     let camera = Camera::pinhole(1920, 1200, 1200.0);
     let calibration = dir.join("camera.yaml");
     std::fs::write(&calibration, camera.to_ros_yaml("render")).unwrap();
-    // The renderer's cones: the shipped geometry is fitted to real cones, whose apex labellers
-    // put 3 % below the tip the renderer draws, so it ranges rendered cones 3 % short (and would
-    // put the camera 3 % low); the rendered cone's keypoint is its tip.
-    let geometry = dir.join("rendered-cones.yaml");
-    std::fs::write(&geometry, "small:\n  keypoint_heights_m: {apex: 0.325}\n").unwrap();
     let mut worst = (0.0_f64, 0.0_f64, 0.0_f64);
     let mut failures = Vec::new();
     for (case, (pitch_deg, roll_deg, height_m)) in [
@@ -114,8 +109,6 @@ fn mount_recovers_the_rendered_mounting() {
             calibration.to_str().unwrap(),
             "--out",
             out.to_str().unwrap(),
-            "--cone-geometry",
-            geometry.to_str().unwrap(),
         ];
         args.extend(frames.iter().map(|p| p.to_str().unwrap()));
         let (ok, stdout, stderr) = conesight(&args);

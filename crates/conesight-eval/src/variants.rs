@@ -225,11 +225,16 @@ mod tests {
             conesight_core::pnp::projected_box(&camera, &ConeModel::small(), &standing).unwrap();
         let all = variants.solve_all(ConeClass::Blue, &ConeObservation::new(keypoints), &cone_box);
         assert_eq!(all.len(), VARIANTS.len());
-        for name in ["cone", "cone_ground", "cone_box"] {
+        for name in ["cone", "cone_ground"] {
             let p = all[name].position_m.unwrap();
             let error = (Point3::from(p) - truth).norm();
             assert!(error < 0.02, "{name}: {error} m");
         }
+        // Fused with a box whose corners are the plate's diagonal (a few per cent long), which
+        // weighs about a twelfth against the keypoints' 1.2 % scale error: within 0.6 %.
+        let p = all["cone_box"].position_m.unwrap();
+        let error = (Point3::from(p) - truth).norm();
+        assert!(error < 0.05, "cone_box: {error} m");
         // The planar model is an approximation: a few per cent at 8 m.
         let p = all["generic"].position_m.unwrap();
         assert!((Point3::from(p) - truth).norm() < 0.5);
