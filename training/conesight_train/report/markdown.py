@@ -251,7 +251,9 @@ def box_cases_section(cases: dict[str, Any]) -> list[str]:
         "height alone (`f_y H / h`), `box` conesight's box ranging (it refuses a box cut by the "
         "image's top or bottom edge), `localiser` what is published (keypoints, with the box "
         "fused in unless it disagrees beyond 3 sigma; no range when the keypoints would not "
-        "show their own box). Counts of cones ranged in brackets.",
+        "show their own box, or fit a whole cone inside a box an image edge cuts: a sliver). "
+        "Counts of cones ranged in brackets. A cone whose lower part a low wall hides is a "
+        "known failure: its base keypoints go with its box, and neither cue ranges it.",
         "",
         table(
             ["case", "cones", "box (one-line)", "box", "keypoints", "localiser", "ranging"],
