@@ -166,13 +166,15 @@ def _neighbour(patch: np.ndarray, other: np.ndarray, rng: np.random.Generator) -
 
 
 def low_resolution(image: np.ndarray, cone_px: float) -> np.ndarray:
-    """The patch as a far cone `cone_px` tall gives it: area-down, bilinear up again."""
-    side = image.shape[0]
-    small = max(4, round(side * cone_px / PATCH_CONE_PX))
-    if small >= side:
+    """The patch as a far cone `cone_px` tall gives it: area-down, bilinear up again (its shape
+    kept; both sides scaled alike)."""
+    height, width = image.shape[:2]
+    scale = cone_px / PATCH_CONE_PX
+    small_h, small_w = max(4, round(height * scale)), max(4, round(width * scale))
+    if small_h >= height:
         return image
-    down = cv2.resize(image, (small, small), interpolation=cv2.INTER_AREA)
-    return cv2.resize(down, (side, side), interpolation=cv2.INTER_LINEAR)
+    down = cv2.resize(image, (small_w, small_h), interpolation=cv2.INTER_AREA)
+    return cv2.resize(down, (width, height), interpolation=cv2.INTER_LINEAR)
 
 
 # How tall a cone framed by the crop rule shows in the 80x80 patch (1/1.2 of the side, minus

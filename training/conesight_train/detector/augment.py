@@ -54,10 +54,18 @@ class DetectorAugmentParams:
     p_hsv: float = 0.8
     hsv_gains: tuple[float, float, float] = (0.015, 0.6, 0.35)
     # The per-channel colour gain and offset stay off (p_colour 0): they shift hue by tens of
-    # degrees; gamma, blur, noise and JPEG as in the keypoint pipeline.
+    # degrees; gamma, blur, noise and JPEG as in the keypoint pipeline. Exposure, glare and low
+    # resolution (added for the keypoints, issue 37) stay off: the shipped detector was
+    # trained without them.
     photometric: AugmentParams = field(
         default_factory=lambda: AugmentParams(
-            p_colour=0.0, p_blur=0.3, blur_sigma_max_px=1.0, p_jpeg=0.3
+            p_colour=0.0,
+            p_blur=0.3,
+            blur_sigma_max_px=1.0,
+            p_jpeg=0.3,
+            p_exposure=0.0,
+            p_glare=0.0,
+            p_low_resolution=0.0,
         )
     )
 
