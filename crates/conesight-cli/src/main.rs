@@ -34,6 +34,7 @@ mod flag_mentions;
 mod foxglove_view;
 mod job_cmd;
 mod keypoints_cmd;
+mod model_args;
 mod mount_cmd;
 mod predict;
 mod record_cmd;

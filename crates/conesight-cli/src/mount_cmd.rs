@@ -8,12 +8,12 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use conesight_core::mount::{MountCone, MountEstimate, MountParams, estimate_mount};
-use conesight_core::{Camera, ConeGeometry, ConePnpParams, Extrinsics};
-use conesight_detect::EgoMask;
-use conesight_onnx::ModelOptions;
+use conesight_core::{Camera, ConePnpParams, Extrinsics};
 use conesight_pipeline::localiser_stage::cone_box_of;
 use conesight_pipeline::source::read_image;
 use conesight_pipeline::{InProcessPipeline, PipelineConfig, PipelineError};
+
+use crate::model_args::ModelArgs;
 
 /// Above these standard deviations the summary says the estimate is rough.
 const ROUGH_ANGLE_SIGMA_DEG: f64 = 0.3;
@@ -40,34 +40,9 @@ pub struct MountArgs {
     /// above the vehicle origin looking straight ahead.
     #[arg(long)]
     extrinsics: Option<PathBuf>,
-    /// Your cones' sizes (YAML, as `conesight predict --cone-geometry`): a cone model 5 %
-    /// too large puts the road, and the camera height, 5 % too far.
-    #[arg(long = "cone-geometry", env = "CONESIGHT_CONE_GEOMETRY")]
-    cone_geometry: Option<PathBuf>,
-    /// Detector model (default: the checkout's models/detector.onnx), conesight's or an
-    /// Ultralytics YOLO ONNX export as it comes.
-    #[arg(long)]
-    detector: Option<PathBuf>,
-    /// Where the car itself shows: detections standing there are dropped (points
-    /// `"x,y x,y x,y"` in frame pixels, or a YAML file with `ego_mask_px`).
-    #[arg(long = "ego-mask")]
-    ego_mask: Option<String>,
-    /// Keypoint model (default: the checkout's models/keypoints.onnx).
-    #[arg(long = "keypoint-model")]
-    keypoint_model: Option<PathBuf>,
-    /// ONNX Runtime library (default: the checkout's build/onnxruntime, or ORT_DYLIB_PATH).
-    #[arg(long = "onnxruntime")]
-    onnxruntime: Option<PathBuf>,
-    /// ONNX Runtime threads per model.
-    #[arg(long = "onnx-threads")]
-    onnx_threads: Option<usize>,
-    /// Where the models run: cpu, cuda or tensorrt (an ONNX Runtime built with it).
-    #[arg(
-        long = "execution-provider",
-        env = "CONESIGHT_EXECUTION_PROVIDER",
-        default_value_t
-    )]
-    execution_provider: conesight_onnx::ExecutionProvider,
+    /// Models, ONNX Runtime and cone geometry (as `conesight predict`'s).
+    #[command(flatten)]
+    models: ModelArgs,
     /// Frames from the camera as mounted, on a flat road with cones standing on it (a few
     /// dozen cones in all, near and far, on both sides), all of one size.
     #[arg(required = true)]
@@ -83,24 +58,7 @@ pub fn run(args: &MountArgs) -> anyhow::Result<()> {
             .with_context(|| format!("extrinsics {}", path.display()))?,
         None => Extrinsics::paper_default(),
     };
-    let geometry = match &args.cone_geometry {
-        Some(path) => ConeGeometry::from_yaml_file(path)?,
-        None => ConeGeometry::shipped(),
-    };
-    let config = PipelineConfig {
-        detector: args.detector.clone(),
-        without_detector: false,
-        keypoint_model: args.keypoint_model.clone(),
-        onnx: ModelOptions {
-            library: args.onnxruntime.clone(),
-            intra_threads: args.onnx_threads,
-            allow_spinning: false,
-            execution_provider: args.execution_provider,
-        },
-        on_ground_plane: false,
-        ego_mask: args.ego_mask.as_deref().map(EgoMask::parse).transpose()?,
-        cone_geometry: geometry,
-    };
+    let config = args.models.pipeline_config(false, false)?;
     let cones = detect_cones(&config, &camera, &start, &args.frames)?;
     let params = MountParams {
         pnp: ConePnpParams::for_keypoint_sigma(
@@ -111,7 +69,7 @@ pub fn run(args: &MountArgs) -> anyhow::Result<()> {
     };
     let estimate = estimate_mount(
         &camera,
-        &geometry,
+        &config.cone_geometry,
         &cones,
         args.frames.len(),
         &start,

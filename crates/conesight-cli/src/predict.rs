@@ -10,12 +10,10 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
-use conesight_core::{Camera, ConeGeometry, Extrinsics};
-use conesight_detect::EgoMask;
-use conesight_onnx::ModelOptions;
+use conesight_core::{Camera, Extrinsics};
 use conesight_pipeline::boxes::read_boxes;
 use conesight_pipeline::source::read_image;
-use conesight_pipeline::{FrameResult, InProcessPipeline, PipelineConfig};
+use conesight_pipeline::{FrameResult, InProcessPipeline};
 use conesight_proto::confidence_from_weight;
 use image::RgbImage;
 use nalgebra::Matrix3;
@@ -23,6 +21,7 @@ use serde_json::{Value, json};
 
 use crate::bev::BevCone;
 use crate::draw::{DrawnCone, SavedFrame, save_frame};
+use crate::model_args::ModelArgs;
 
 /// Arguments of `conesight predict`.
 #[derive(Debug, clap::Args)]
@@ -43,41 +42,12 @@ pub struct PredictArgs {
     /// 3 large_orange) or KITTI label lines with FSOCO class names.
     #[arg(long)]
     boxes: Option<PathBuf>,
-    /// Detector model (default: the checkout's models/detector.onnx): conesight's, or an
-    /// Ultralytics YOLO ONNX export as it comes (`yolo export model=best.pt format=onnx`,
-    /// with or without `nms=True`); class names and input size are read from its metadata.
-    #[arg(long)]
-    detector: Option<PathBuf>,
-    /// Where the car itself shows: detections standing there are dropped. Points
-    /// `"x,y x,y x,y"` in frame pixels (polygons separated by `;`), or a YAML/JSON file with
-    /// `ego_mask_px: [[x, y], ...]`.
-    #[arg(long = "ego-mask")]
-    ego_mask: Option<String>,
-    /// Keypoint model (default: the checkout's models/keypoints.onnx).
-    #[arg(long = "keypoint-model")]
-    keypoint_model: Option<PathBuf>,
-    /// ONNX Runtime library (default: the checkout's build/onnxruntime, or ORT_DYLIB_PATH).
-    #[arg(long = "onnxruntime")]
-    onnxruntime: Option<PathBuf>,
-    /// ONNX Runtime threads per model.
-    #[arg(long = "onnx-threads")]
-    onnx_threads: Option<usize>,
-    /// Where the models run: cpu, cuda or tensorrt (an ONNX Runtime built with it).
-    #[arg(
-        long = "execution-provider",
-        env = "CONESIGHT_EXECUTION_PROVIDER",
-        default_value_t
-    )]
-    execution_provider: conesight_onnx::ExecutionProvider,
+    /// Models, ONNX Runtime and cone geometry.
+    #[command(flatten)]
+    models: ModelArgs,
     /// Constrain cone bases to the road plane of the extrinsics.
     #[arg(long = "ground-plane")]
     ground_plane: bool,
-    /// Your cones' sizes and keypoint heights, per size or class (YAML: `small:`/`large:` or
-    /// `blue:`.. with height_m, plate_half_width_m, plate_height_m, keypoint_heights_m {base,
-    /// lower_stripe, upper_stripe, apex}, body_radius_m {base, apex}, scale); default: the
-    /// shipped geometry, fitted to real FSOCO cones (models/keypoints.md).
-    #[arg(long = "cone-geometry", env = "CONESIGHT_CONE_GEOMETRY")]
-    cone_geometry: Option<PathBuf>,
     /// Write each image annotated (`<stem>.png`: boxes in cone colour with class, score and
     /// range, keypoints, a cross where the range failed) and its cones from above
     /// (`<stem>_bev.png`) into this folder.
@@ -111,23 +81,9 @@ pub fn run(args: &PredictArgs) -> anyhow::Result<()> {
             .with_context(|| format!("extrinsics {}", path.display()))?,
         None => Extrinsics::paper_default(),
     };
-    let config = PipelineConfig {
-        detector: args.detector.clone(),
-        without_detector: args.boxes.is_some(),
-        keypoint_model: args.keypoint_model.clone(),
-        onnx: ModelOptions {
-            library: args.onnxruntime.clone(),
-            intra_threads: args.onnx_threads,
-            allow_spinning: false,
-            execution_provider: args.execution_provider,
-        },
-        on_ground_plane: args.ground_plane,
-        ego_mask: args.ego_mask.as_deref().map(EgoMask::parse).transpose()?,
-        cone_geometry: match &args.cone_geometry {
-            Some(path) => ConeGeometry::from_yaml_file(path)?,
-            None => ConeGeometry::shipped(),
-        },
-    };
+    let config = args
+        .models
+        .pipeline_config(args.boxes.is_some(), args.ground_plane)?;
     let mut pipeline = InProcessPipeline::load(&config, &camera, &extrinsics)?;
     let assumed = args.camera.is_none();
     let stdout = std::io::stdout();

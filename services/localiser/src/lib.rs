@@ -72,10 +72,7 @@ pub async fn run(args: &LocaliserArgs, node: Node, shutdown: Shutdown) -> anyhow
         Some(path) => Some(Extrinsics::from_yaml_file(path)?),
         None => None,
     };
-    let geometry = match &args.cone_geometry {
-        Some(path) => ConeGeometry::from_yaml_file(path)?,
-        None => ConeGeometry::shipped(),
-    };
+    let geometry = ConeGeometry::from_file_or_shipped(args.cone_geometry.as_deref())?;
     let calibration = Arc::new(CalibrationCell::default());
     follow_camera_info(&node, camera, calibration.clone(), &shutdown).await?;
     let publisher = node.declare_output(camera, Stream::Cones).await?;

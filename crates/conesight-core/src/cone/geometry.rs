@@ -71,6 +71,11 @@ impl ConeGeometry {
         Self::from_yaml_str(&text, &path.display().to_string())
     }
 
+    /// The geometry of the YAML file at `path`, or the shipped one when there is none.
+    pub fn from_file_or_shipped(path: Option<&Path>) -> Result<Self, ConfigError> {
+        path.map_or_else(|| Ok(Self::shipped()), Self::from_yaml_file)
+    }
+
     /// Parses a geometry YAML text; `what` names the source in errors.
     pub fn from_yaml_str(text: &str, what: &str) -> Result<Self, ConfigError> {
         let file: GeometryFile =
