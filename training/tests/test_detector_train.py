@@ -2,6 +2,8 @@
 a wall-clock budget stops it on a small learning rate, mixed sources are drawn by weight, and
 the ONNX export matches PyTorch and carries its metadata."""
 
+from dataclasses import replace
+
 import numpy as np
 import onnx
 import pytest
@@ -216,3 +218,33 @@ def test_a_checkpoint_exports_and_evaluates_at_another_input_size(tmp_path, caps
             )
         err = capsys.readouterr().err
         assert "--input-size" in err and ("WIDTHxHEIGHT" in err or "multiples of 32" in err), err
+
+
+def test_a_run_spread_over_sittings_ends_with_the_weights_of_one_sitting(tmp_path):
+    # The same seeded run, once in one go and once stopped after 3 steps (a sitting) and
+    # resumed: data order, optimiser, schedule and the weight average all carry over.
+    torch.manual_seed(0)
+    whole = tiny_run(
+        "toy:16",
+        "toy:2:9",
+        tmp_path / "whole",
+        steps=6,
+        batch_size=2,
+        val_every=4,
+        ema_decay=0.9,
+    )
+    train(whole, progress=False)
+    split = replace(whole, out=str(tmp_path / "split"), sitting_steps=3)
+    first = train(split, progress=False)
+    assert first["steps"] == 3
+    assert load_checkpoint(tmp_path / "split" / "last.pt")["step"] == 3
+    rest = train(replace(split, sitting_steps=0), resume=True, progress=False)
+    assert rest["steps"] == 6
+    a = load_checkpoint(tmp_path / "whole" / "last.pt")
+    b = load_checkpoint(tmp_path / "split" / "last.pt")
+    for key in ("model_state", "train_model_state"):
+        for name, value in a[key].items():
+            torch.testing.assert_close(b[key][name], value, rtol=1e-5, atol=1e-6, msg=name)
+    np.testing.assert_allclose(
+        [h[:4] for h in b["history"]], [h[:4] for h in a["history"]], rtol=1e-5
+    )

@@ -30,7 +30,9 @@ import numpy as np
 from conesight_train.augment import AugmentParams, photometric
 from conesight_train.detector.cache import ReducedFrame
 from conesight_train.detector.data import LabelledFrame
+from conesight_train.detector.degrade import DegradeParams, degrade
 from conesight_train.detector.frame_input import FILL, FrameInputParams, frame_to_input
+from conesight_train.detector.negatives import hard_negatives
 
 MIN_VISIBLE_FRACTION = 0.4
 
@@ -48,6 +50,16 @@ class DetectorAugmentParams:
     # cone a window is centred on: about the square root of the classes' inverse frequency in
     # the real training frames (8,310 / 8,509 / 1,870 / 462 labels).
     centre_class_weights: tuple[float, ...] = (1.0, 1.0, 2.0, 4.0)
+    # Onboard video (issue 38): the whole frame degraded before its crop (`degrade.py`:
+    # 640 rows, the car's body, motion blur, exposure, glare, overlay, JPEG q30-50); real
+    # frames only.
+    p_degrade: float = 0.0
+    degrade: DegradeParams = field(default_factory=DegradeParams)
+    # Hard negatives (issue 38): a window centred on a mined false positive of an earlier
+    # model (`negatives.py`, JSON of boxes per frame name) with this probability, when the
+    # frame has one.
+    hard_negatives: str = ""
+    p_on_negative: float = 0.0
     p_flip: float = 0.5
     # HSV jitter: hue shift as a fraction of the circle (0.015 = +-5.4 degrees), saturation
     # and value gains 1 +- these (uniform); applied with probability p_hsv.
@@ -137,6 +149,13 @@ def train_sample(
 ) -> InputSample:
     """A random training crop of `frame` (module docs)."""
     p = p or DetectorAugmentParams()
+    negatives = np.zeros((0, 4))
+    if p.hard_negatives and isinstance(frame, LabelledFrame):
+        negatives = hard_negatives(p.hard_negatives).get(frame.name, negatives)
+    if p.p_degrade > 0 and isinstance(frame, LabelledFrame) and rng.random() < p.p_degrade:
+        w_before = frame.image_rgb.shape[1]
+        frame = degrade(frame, rng, p.degrade)
+        negatives = negatives * (frame.image_rgb.shape[1] / w_before)
     stored, per_frame_px, frame_hw = _stored(frame)
     sx0, sy0 = params.scale_xy(frame_hw)
     lo, hi = np.log(p.scale_range[0]), np.log(p.scale_range[1])
@@ -151,7 +170,11 @@ def train_sample(
     boxes = frame.boxes_px.astype(np.float64).reshape(-1, 4) * [kx, ky, kx, ky]
     cw, ch = p.crop_width_px, p.crop_height_px
     usable = np.nonzero(~frame.difficult_mask() & (frame.classes >= 0))[0]
-    if len(usable) and rng.random() < p.p_on_cone:
+    if len(negatives) and rng.random() < p.p_on_negative:
+        b = negatives[rng.integers(len(negatives))] * [kx, ky, kx, ky]
+        x0 = (b[0] + b[2]) / 2 - rng.uniform(0.1, 0.9) * cw
+        y0 = (b[1] + b[3]) / 2 - rng.uniform(0.1, 0.9) * ch
+    elif len(usable) and rng.random() < p.p_on_cone:
         weights = np.asarray(p.centre_class_weights, np.float64)[frame.classes[usable]]
         b = boxes[usable[rng.choice(len(usable), p=weights / weights.sum())]]
         x0 = (b[0] + b[2]) / 2 - rng.uniform(0.1, 0.9) * cw

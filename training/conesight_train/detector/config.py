@@ -18,6 +18,7 @@ import yaml
 from conesight_train.augment import AugmentParams
 from conesight_train.detector.augment import DetectorAugmentParams
 from conesight_train.detector.data import FrameSource, RendererFrames, ToyFrames
+from conesight_train.detector.degrade import DegradeParams
 from conesight_train.detector.frame_input import FrameInputParams
 from conesight_train.detector.loss import LossParams
 from conesight_train.detector.model import DetectorParams
@@ -52,6 +53,12 @@ class TrainConfig:
     # The same in CPU minutes of the run (its process and data workers; 0: no limit): a budget
     # that a busy machine does not shrink, and the one the detector benchmark compares.
     max_cpu_minutes: float = 0.0
+    # One sitting of a longer run: stop after this many steps or wall-clock minutes of this
+    # process (0: no limit), saving `last.pt` for `--resume`. Unlike the budgets above it does
+    # not touch the learning-rate schedule, so a run spread over sittings is the run it would
+    # have been in one. SIGTERM and SIGINT end a sitting the same way, at the end of a step.
+    sitting_steps: int = 0
+    sitting_minutes: float = 0.0
     # Exponential moving average of the weights (0: off): validation, checkpoints' model_state
     # and export use the averaged weights. Decay ramps up as decay (1 - exp(-updates / ramp)).
     ema_decay: float = 0.0
@@ -66,6 +73,10 @@ class TrainConfig:
     warmup_steps: int = 100
     seed: int = 0
     threads: int = 1
+    # Where the network trains: "cpu", or "cuda" (a GPU; bfloat16 autocast there too). Data
+    # loading stays on the CPU. The checkpoints' history records wall and CPU seconds either
+    # way, and `device_name` the device (the compute a card states).
+    device: str = "cpu"
     workers: int = 1
     val_every: int = 250
     val_limit: int = 100
@@ -106,6 +117,12 @@ class TrainConfig:
                     a[key] = tuple(a[key])
             if "photometric" in a:
                 a["photometric"] = AugmentParams(**a["photometric"])
+            if "degrade" in a:
+                g = dict(a["degrade"])
+                for key in ("ego_height", "motion_blur_px", "exposure_gain", "jpeg_quality"):
+                    if key in g:
+                        g[key] = tuple(g[key])
+                a["degrade"] = DegradeParams(**g)
             d["augment"] = DetectorAugmentParams(**a)
         if "model" in d:
             d["model"] = DetectorParams.from_dict({**DetectorParams().to_dict(), **d["model"]})

@@ -43,13 +43,14 @@ def predict_frames(
 ) -> list[ImageResult]:
     """Detections and truths (frame pixels) for every frame of `source`."""
     head = ExportHead(model).eval()
+    device = next(model.parameters()).device
     results: list[ImageResult] = []
     for start in range(0, len(source), batch_size):
         frames = [source[i] for i in range(start, min(start + batch_size, len(source)))]
         samples = [to_input(f, input_params) for f in frames]
         inputs = np.stack([s.image for s in samples])
         with torch.no_grad():
-            outputs = head(torch.from_numpy(inputs)).numpy()
+            outputs = head(torch.from_numpy(inputs).to(device)).float().cpu().numpy()
         for frame, sample, output in zip(frames, samples, outputs, strict=True):
             results.append(
                 frame_result(frame, detections_in_frame(output, sample.scale_xy, thresholds))
