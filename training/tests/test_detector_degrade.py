@@ -103,3 +103,31 @@ def test_training_on_a_missing_gpu_says_so(tmp_path):
     config = replace(TrainConfig(), sources=[], out=str(tmp_path), device="cuda")
     with pytest.raises(SystemExit, match="no CUDA GPU"):
         train(config, progress=False)
+
+
+def test_pasted_large_orange_cones_come_with_their_boxes_and_cover_no_label(tmp_path):
+    from conesight_train.detector.paste import LARGE_ORANGE, load_bank, paste_cones
+
+    # A bank of one orange cone on grey road, cut with its margin.
+    patch = np.full((60, 40, 3), 90, np.uint8)
+    patch[6:54, 4:36] = (240, 110, 20)
+    path = tmp_path / "bank.npz"
+    np.savez(
+        path,
+        pixels=patch.reshape(-1),
+        shapes=np.array([[60, 40]]),
+        boxes=np.array([[4.0, 6.0, 36.0, 54.0]]),
+    )
+    bank = load_bank(str(path))
+    canvas = np.full((384, 640, 3), 120, np.uint8)
+    labelled = np.array([[0.0, 0.0, 320.0, 384.0]])  # the left half holds a labelled cone
+    for seed in range(5):
+        out, pasted = paste_cones(canvas, labelled, bank, np.random.default_rng(seed), 2)
+        for x0, y0, x1, y1 in pasted:
+            assert x0 >= 320 and 0 <= y0 < y1 <= 384 and x1 <= 640
+            centre = out[int((y0 + y1) / 2), int((x0 + x1) / 2)]
+            assert centre[0] > 200 and centre[2] < 60, centre  # the cone's orange
+        assert (out[:, :320] == 120).all()
+    params = DetectorAugmentParams(paste_bank=str(path), p_paste=1.0, p_on_cone=0.0)
+    sample = train_sample(frame(), FrameInputParams(1152, 736), np.random.default_rng(3), params)
+    assert (sample.classes == LARGE_ORANGE).sum() >= 1

@@ -33,6 +33,7 @@ from conesight_train.detector.data import LabelledFrame
 from conesight_train.detector.degrade import DegradeParams, degrade
 from conesight_train.detector.frame_input import FILL, FrameInputParams, frame_to_input
 from conesight_train.detector.negatives import hard_negatives
+from conesight_train.detector.paste import LARGE_ORANGE, load_bank, paste_cones
 
 MIN_VISIBLE_FRACTION = 0.4
 
@@ -60,6 +61,10 @@ class DetectorAugmentParams:
     # frame has one.
     hard_negatives: str = ""
     p_on_negative: float = 0.0
+    # Copy-paste (issue 38): with this probability a window gets 1-2 real large orange cones
+    # from the bank `paste_bank` (`paste.py`), where they overlap no labelled cone.
+    paste_bank: str = ""
+    p_paste: float = 0.0
     p_flip: float = 0.5
     # HSV jitter: hue shift as a fraction of the circle (0.015 = +-5.4 degrees), saturation
     # and value gains 1 +- these (uniform); applied with probability p_hsv.
@@ -112,7 +117,17 @@ def hsv_jitter(
 def _keep_visible(
     boxes: np.ndarray, frame: LabelledFrame | ReducedFrame, w: float, h: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    classes, ranges, difficult = frame.classes, frame.range_m, frame.difficult_mask()
+    return _keep_visible_labels(boxes, frame.classes, frame.range_m, frame.difficult_mask(), w, h)
+
+
+def _keep_visible_labels(
+    boxes: np.ndarray,
+    classes: np.ndarray,
+    ranges: np.ndarray,
+    difficult: np.ndarray,
+    w: float,
+    h: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     if len(boxes) == 0:
         return boxes.reshape(0, 4), classes, ranges, difficult
     clipped = np.clip(boxes, 0, [w, h, w, h])
@@ -191,6 +206,15 @@ def train_sample(
             src_y0:src_y1, src_x0:src_x1
         ]
     boxes -= [ox, oy, ox, oy]
+    classes, ranges, difficult = frame.classes, frame.range_m, frame.difficult_mask()
+    if p.paste_bank and rng.random() < p.p_paste:
+        canvas, pasted = paste_cones(
+            canvas, boxes, load_bank(p.paste_bank), rng, int(rng.integers(1, 3))
+        )
+        boxes = np.concatenate([boxes, pasted])
+        classes = np.concatenate([classes, np.full(len(pasted), LARGE_ORANGE)])
+        ranges = np.concatenate([ranges, np.full(len(pasted), np.nan)])
+        difficult = np.concatenate([difficult, np.zeros(len(pasted), bool)])
     if rng.random() < p.p_flip:
         canvas = canvas[:, ::-1]
         boxes[:, [0, 2]] = cw - boxes[:, [2, 0]]
@@ -199,4 +223,6 @@ def train_sample(
         canvas = hsv_jitter(canvas, rng, p.hsv_gains)
     image = photometric(canvas, rng, p.photometric)
     image = np.ascontiguousarray(image.transpose(2, 0, 1), dtype=np.float32)
-    return InputSample(image, *_keep_visible(boxes, frame, cw, ch), (0.0, 0.0))
+    return InputSample(
+        image, *_keep_visible_labels(boxes, classes, ranges, difficult, cw, ch), (0.0, 0.0)
+    )
