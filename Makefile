@@ -8,7 +8,7 @@ ROOT := $(CURDIR)
 PY := $(ROOT)/build/venv/bin/python
 export ORT_DYLIB_PATH ?= $(ROOT)/build/onnxruntime/libonnxruntime.so.1.31.1
 
-.PHONY: setup setup-runtime demo demo-geometry test test-rust test-python lint bench bench-pnp bench-pipeline bench-detector clean
+.PHONY: setup setup-runtime demo demo-geometry test test-rust test-python lint bench bench-pnp bench-pipeline bench-detector quantize clean
 
 setup:
 	@bash scripts/setup.sh all
@@ -61,6 +61,27 @@ PEER ?= build/peer/yolo11n/weights/best.onnx
 bench-detector: setup
 	$(PY) bench/detector_vs_yolo.py --ours models/detector.onnx --peer $(PEER) \
 	  --markdown build/detector-benchmark.md --json build/detector-benchmark.json
+
+## Int8 copies of the shipped networks (issue 42): models/detector.int8.onnx and
+## models/keypoints.int8.onnx with their cards, calibrated on real training frames and crops,
+## measured against fp32 on the real test frames and validation crops, then timed side by side
+## (training/conesight_train/quantize.py, bench_precision.py). Needs ../shared; ~8 minutes.
+REAL_DATA := ../shared/data
+quantize: setup
+	PYTHONPATH=training $(PY) -m conesight_train.quantize detector \
+	  --model models/detector.onnx --out models/detector.int8.onnx \
+	  --calibration yolo:$(REAL_DATA)/real-train/fsoco-boxes/train \
+	  --evaluate test=yolo:$(REAL_DATA)/real-train/fsoco-boxes/test \
+	  --evaluate valid=yolo:$(REAL_DATA)/real-train/fsoco-boxes/valid --exclude first
+	PYTHONPATH=training $(PY) -m conesight_train.quantize keypoints \
+	  --model models/keypoints.onnx --out models/keypoints.int8.onnx \
+	  --calibration real:$(REAL_DATA)/real-train/amz-keypoint-crops-hires:train \
+	  --calibration real:$(REAL_DATA)/real-train/tuwr-keypoint-crops:train \
+	  --calibration real:$(REAL_DATA)/real-dev/fsoco-keypoint-crops:train \
+	  --evaluate amz_val=real:$(REAL_DATA)/real-dev/fsoco-keypoint-crops:val \
+	  --evaluate hires_val=real:$(REAL_DATA)/real-train/amz-keypoint-crops-hires:val \
+	  --evaluate tuwr_val=real:$(REAL_DATA)/real-train/tuwr-keypoint-crops:val
+	PYTHONPATH=training $(PY) -m conesight_train.bench_precision --threads 1 2 --cards
 
 ## In-process vs over Zenoh (4 processes): per-stage latency, rate sweep, bus cost ratio.
 bench-pipeline: setup
