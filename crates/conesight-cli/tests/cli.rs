@@ -175,6 +175,56 @@ fn predict_locates_rendered_cones_and_reports_unreadable_images() {
     assert!(relative[relative.len() / 2] < 0.06, "{relative:.3?}");
 }
 
+/// Issue 40: a JPEG cut in half is an error naming the file (before, its missing half was
+/// painted grey and predict found 17 of 20 cones and exited 0); the whole image beside it is
+/// still processed.
+#[test]
+fn predict_refuses_a_truncated_jpeg_by_name_and_processes_the_others() {
+    let dir = TempDir::new("predict-truncated");
+    render(&dir.0);
+    let png = image::open(dir.0.join("images/000000.png"))
+        .unwrap()
+        .to_rgb8();
+    let mut jpeg = Vec::new();
+    image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpeg, 90)
+        .encode_image(&png)
+        .unwrap();
+    let whole = dir.0.join("whole.jpg");
+    let half = dir.0.join("half.jpg");
+    std::fs::write(&whole, &jpeg).unwrap();
+    std::fs::write(&half, &jpeg[..jpeg.len() / 2]).unwrap();
+    let camera = dir.0.join("camera_info/000000.yaml");
+    let output = conesight(&[
+        "predict",
+        "--camera",
+        camera.to_str().unwrap(),
+        half.to_str().unwrap(),
+        whole.to_str().unwrap(),
+    ]);
+    assert_eq!(
+        output.status.code(),
+        Some(1),
+        "a truncated image fails the run"
+    );
+    let lines = json_lines(&output);
+    assert_eq!(lines.len(), 2);
+    let error = lines[0]["error"].as_str().unwrap();
+    assert!(
+        error.contains("half.jpg") && error.contains("truncated"),
+        "{error}"
+    );
+    assert!(
+        lines[0]["cones"].is_null(),
+        "no cones from a truncated image"
+    );
+    assert!(
+        !lines[1]["cones"].as_array().unwrap().is_empty(),
+        "the whole image beside it gives cones"
+    );
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(stderr.contains("half.jpg"), "{stderr}");
+}
+
 #[test]
 fn predict_with_given_boxes_keeps_every_box() {
     let dir = TempDir::new("boxes");

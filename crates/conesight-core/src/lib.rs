@@ -4,6 +4,8 @@
 //! cone's 3D position. Synchronous, no I/O beyond parsing configuration text.
 //!
 //! Modules:
+//! - [`bounds`]: the plausibility bounds of every input (focal length as a field of view,
+//!   principal point, distortion, keypoints, boxes), in one place.
 //! - [`camera`]: pinhole + OpenCV `plumb_bob` distortion ([`camera::Camera`]), ROS
 //!   `camera_info` YAML, extrinsics (`vehicle_from_camera`) and the paper's default camera.
 //! - [`cone`]: the Formula Student cone models, the 7 keypoints, the cross-ratio and the exact
@@ -18,6 +20,7 @@
 //! ROS REP-103 (x forward, y left, z up). Transforms are named `target_from_source`.
 //! Units: metres, radians, pixels (`_px`).
 
+pub mod bounds;
 pub mod camera;
 pub mod cone;
 pub mod error;

@@ -4,7 +4,9 @@
 //! Ultralytics models letterbox it), so nothing here depends on the calibration: a camera
 //! pitched down, mounted high or bouncing keeps its cones in view. What the stage can still be
 //! told is where the car itself shows: an [`EgoMask`], whose detections are dropped and
-//! counted ([`DetectorStage::coverage`] says what the detector covers).
+//! counted ([`DetectorStage::coverage`] says what the detector covers). Boxes are clipped to
+//! the frame; one under 2 px on a side after that is dropped (the bounds every consumer
+//! checks, `conesight_core::bounds`).
 
 use std::ops::Deref;
 use std::path::Path;
@@ -97,8 +99,8 @@ impl DetectorStage {
                 .is_some_and(|m| m.covers_box(detection.bbox_px))
             {
                 output.masked += 1;
-            } else {
-                output.detections.push(to_core(&detection));
+            } else if let Some(detection) = to_core(&detection, size) {
+                output.detections.push(detection);
             }
         }
         Ok(output)
@@ -131,9 +133,12 @@ impl DetectorStage {
     }
 }
 
-fn to_core(d: &conesight_detect::Detection) -> ConeDetection {
-    let [x_min, y_min, x_max, y_max] = d.bbox_px.map(f64::from);
-    ConeDetection {
+/// The detection with its box clipped to the frame; `None` when what is left is no plausible
+/// box (`conesight_core::bounds::clip_box`: under 2 px on a side), which no consumer accepts.
+fn to_core(d: &conesight_detect::Detection, frame_px: (u32, u32)) -> Option<ConeDetection> {
+    let [x_min, y_min, x_max, y_max] =
+        conesight_core::bounds::clip_box(d.bbox_px.map(f64::from), frame_px)?;
+    Some(ConeDetection {
         class: d.class,
         score: d.score.clamp(0.0, 1.0),
         box_px: PixelBox {
@@ -142,5 +147,5 @@ fn to_core(d: &conesight_detect::Detection) -> ConeDetection {
             x_max_px: x_max,
             y_max_px: y_max,
         },
-    }
+    })
 }

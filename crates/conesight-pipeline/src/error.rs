@@ -44,6 +44,14 @@ pub enum PipelineError {
         /// The decoder's message.
         reason: String,
     },
+    /// An image file is truncated, corrupt or of an unsupported format.
+    #[error("image {path}: {error}")]
+    ImageDecode {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong with it, and the fix.
+        error: conesight_vision::DecodeError,
+    },
     /// A folder could not be listed or has no images.
     #[error("image folder {path}: {reason}")]
     Folder {
@@ -90,6 +98,7 @@ impl PipelineError {
             Self::Geometry(_) => "geometry",
             Self::Render(_) => "render",
             Self::ImageRead { .. } => "image_read",
+            Self::ImageDecode { error, .. } => error.kind(),
             Self::Folder { .. } => "folder",
             Self::Boxes { .. } => "boxes",
             Self::CalibrationSize { .. } => "calibration_size",

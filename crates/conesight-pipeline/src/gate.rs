@@ -14,12 +14,20 @@
 //!
 //! Gaps in a stream's `frame_sequence` (the camera counts every frame it acquires) are counted
 //! as lost in `conesight_frames_lost_total{stream}`: frames dropped on the way (a full
-//! transmit queue, a restart of this service) are seen, not silent. A sequence that goes back
-//! means the source restarted; counting starts again from there.
+//! transmit queue, a restart of this service) are seen, not silent. Only messages that passed
+//! every check, decoding and the plausibility bounds included, move the count
+//! ([`InputGate::validated`], called by the worker once a message is whole): a refused
+//! message carrying sequence `live + 10^12` no longer counts 10^12 frames lost. Messages that
+//! arrived and passed the header checks but were replaced in the worker's slot or refused
+//! later are not lost either (they arrived): the gate remembers the sequences it admitted
+//! since the last validated one. A sequence that goes back, or jumps ahead by more than
+//! [`MAX_SEQUENCE_JUMP`], is a new stream (a restarted camera, a replay): counted in
+//! `conesight_stream_restarts_total{stream}`, not as lost frames; counting starts again
+//! from there.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, VecDeque};
 use std::sync::{Mutex, PoisonError};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use conesight_proto::{now_ns, pb};
 
@@ -30,6 +38,43 @@ use crate::node::Node;
 pub const MAX_FUTURE: Duration = Duration::from_millis(500);
 /// Inputs acquired longer ago than this are stale by default.
 pub const DEFAULT_MAX_AGE: Duration = Duration::from_secs(2);
+/// A sequence jump larger than this is a new stream, not lost frames: 10,000 frames are
+/// 16 min at 10 Hz, longer than any outage a running camera's stream survives.
+pub const MAX_SEQUENCE_JUMP: u64 = 10_000;
+/// Admitted sequences remembered per stream between two validated messages.
+const ADMITTED_KEPT: usize = 256;
+
+/// What a validated message's sequence says about its stream.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SequenceStep {
+    /// The first message of the stream.
+    First,
+    /// The next message; `lost` frames never arrived in between.
+    Next {
+        /// Frames lost.
+        lost: u64,
+    },
+    /// The same sequence again.
+    Repeat,
+    /// The sequence went back or jumped by more than [`MAX_SEQUENCE_JUMP`]: a new stream.
+    Restart {
+        /// The previous validated sequence.
+        from: u64,
+        /// This one.
+        to: u64,
+    },
+}
+
+/// One stream's sequence state.
+#[derive(Debug, Default)]
+struct StreamState {
+    /// The last validated sequence.
+    last_valid: Option<u64>,
+    /// Sequences admitted since (oldest first, at most [`ADMITTED_KEPT`]).
+    admitted: VecDeque<u64>,
+    /// When a restart of this stream was last logged.
+    restart_logged: Option<Instant>,
+}
 
 /// Why a header was refused.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -91,7 +136,7 @@ impl GateError {
 pub struct InputGate {
     camera: String,
     max_age: Option<Duration>,
-    last_sequence: Mutex<HashMap<&'static str, u64>>,
+    streams: Mutex<HashMap<&'static str, StreamState>>,
 }
 
 impl InputGate {
@@ -100,18 +145,19 @@ impl InputGate {
         Self {
             camera: camera.to_owned(),
             max_age,
-            last_sequence: Mutex::new(HashMap::new()),
+            streams: Mutex::new(HashMap::new()),
         }
     }
 
-    /// Checks `header` of a `stream` message at `now` (ns since the Unix epoch); on success
-    /// returns the frames lost since this stream's previous message.
+    /// Checks `header` of a `stream` message at `now` (ns since the Unix epoch): its camera
+    /// and stamps. An admitted sequence is remembered (it arrived: not lost, whatever becomes
+    /// of the message); it moves nothing until [`Self::sequence_step`] validates it.
     pub fn check_at(
         &self,
         stream: &'static str,
         header: &pb::Header,
         now: u64,
-    ) -> Result<u64, GateError> {
+    ) -> Result<(), GateError> {
         if header.camera_id != self.camera {
             return Err(GateError::WrongCamera {
                 stream,
@@ -120,16 +166,47 @@ impl InputGate {
             });
         }
         self.check_age_at(stream, header, now)?;
-        let mut last = self
-            .last_sequence
-            .lock()
-            .unwrap_or_else(PoisonError::into_inner);
-        let sequence = header.frame_sequence;
-        let lost = match last.insert(stream, sequence) {
-            Some(previous) if sequence > previous => sequence - previous - 1,
-            _ => 0,
-        };
-        Ok(lost)
+        let mut streams = self.streams();
+        let state = streams.entry(stream).or_default();
+        if state.admitted.len() == ADMITTED_KEPT {
+            state.admitted.pop_front();
+        }
+        state.admitted.push_back(header.frame_sequence);
+        Ok(())
+    }
+
+    /// The step from `stream`'s last validated sequence to `sequence`, a message that passed
+    /// every check; it becomes the last validated one.
+    pub fn sequence_step(&self, stream: &'static str, sequence: u64) -> SequenceStep {
+        let mut streams = self.streams();
+        let state = streams.entry(stream).or_default();
+        let previous = state.last_valid.replace(sequence);
+        // Admitted ones in between arrived: they are not lost.
+        let arrived = previous.map_or(0, |previous| {
+            state
+                .admitted
+                .iter()
+                .filter(|s| **s > previous && **s < sequence)
+                .count() as u64
+        });
+        state.admitted.retain(|s| *s > sequence);
+        match previous {
+            None => SequenceStep::First,
+            Some(previous) if previous == sequence => SequenceStep::Repeat,
+            Some(previous) if sequence < previous || sequence - previous > MAX_SEQUENCE_JUMP => {
+                SequenceStep::Restart {
+                    from: previous,
+                    to: sequence,
+                }
+            }
+            Some(previous) => SequenceStep::Next {
+                lost: (sequence - previous - 1).saturating_sub(arrived),
+            },
+        }
+    }
+
+    fn streams(&self) -> std::sync::MutexGuard<'_, HashMap<&'static str, StreamState>> {
+        self.streams.lock().unwrap_or_else(PoisonError::into_inner)
     }
 
     /// The time checks alone (future, stale) at `now`: for an input about to be published.
@@ -161,21 +238,46 @@ impl InputGate {
         Ok(())
     }
 
-    /// [`Self::check_at`] now; a refused header is counted and reported on `node`, lost frames
-    /// are counted. True when the input may be used.
+    /// [`Self::check_at`] now; a refused header is counted and reported on `node`. True when
+    /// the input may be used.
     pub fn admit(&self, node: &Node, stream: &'static str, header: &pb::Header) -> bool {
         match self.check_at(stream, header, now_ns()) {
-            Ok(lost) => {
-                if lost > 0 {
-                    node.metrics.frames_lost(stream, lost);
-                }
-                true
-            }
+            Ok(()) => true,
             Err(error) => {
                 node.metrics.frame_dropped();
                 node.errors.report(error.kind(), &error);
                 false
             }
+        }
+    }
+
+    /// A `stream` message with `header` passed every check (decoded, within the bounds): its
+    /// sequence counts. Gaps are counted as frames lost on `node`, a new stream as a restart
+    /// (logged at most once per [`conesight_service::errors::DEFAULT_LOG_INTERVAL`]).
+    pub fn validated(&self, node: &Node, stream: &'static str, header: &pb::Header) {
+        match self.sequence_step(stream, header.frame_sequence) {
+            SequenceStep::Next { lost } if lost > 0 => node.metrics.frames_lost(stream, lost),
+            SequenceStep::Restart { from, to } => {
+                node.metrics.stream_restarted(stream);
+                let now = Instant::now();
+                let mut streams = self.streams();
+                let state = streams.entry(stream).or_default();
+                let due = state.restart_logged.is_none_or(|at| {
+                    now.duration_since(at) >= conesight_service::errors::DEFAULT_LOG_INTERVAL
+                });
+                if due {
+                    state.restart_logged = Some(now);
+                    tracing::info!(
+                        service = node.name,
+                        stream,
+                        from,
+                        to,
+                        "{stream} stream started again (sequence {from} -> {to}): its source \
+                         restarted; counted in conesight_stream_restarts_total, not as lost frames"
+                    );
+                }
+            }
+            _ => {}
         }
     }
 
@@ -214,7 +316,10 @@ mod tests {
     #[test]
     fn wrong_camera_future_and_stale_stamps_are_refused() {
         let gate = InputGate::new("front", Some(Duration::from_secs(2)));
-        assert_eq!(gate.check_at("frame", &header("front", 0, NOW), NOW), Ok(0));
+        assert_eq!(
+            gate.check_at("frame", &header("front", 0, NOW), NOW),
+            Ok(())
+        );
         let wrong = gate
             .check_at("frame", &header("left", 1, NOW), NOW)
             .unwrap_err();
@@ -253,15 +358,62 @@ mod tests {
     #[test]
     fn sequence_gaps_are_frames_lost_per_stream() {
         let gate = InputGate::new("front", None);
-        let lost = |stream, sequence| gate.check_at(stream, &header("front", sequence, NOW), NOW);
-        assert_eq!(lost("frame", 10), Ok(0));
-        assert_eq!(lost("frame", 11), Ok(0));
-        assert_eq!(lost("frame", 15), Ok(3));
+        let step = |stream, sequence| {
+            gate.check_at(stream, &header("front", sequence, NOW), NOW)
+                .unwrap();
+            gate.sequence_step(stream, sequence)
+        };
+        assert_eq!(step("frame", 10), SequenceStep::First);
+        assert_eq!(step("frame", 11), SequenceStep::Next { lost: 0 });
+        assert_eq!(step("frame", 15), SequenceStep::Next { lost: 3 });
         // Another stream has its own count.
-        assert_eq!(lost("detections", 15), Ok(0));
-        // A duplicate or a restart (the sequence goes back) loses nothing.
-        assert_eq!(lost("frame", 15), Ok(0));
-        assert_eq!(lost("frame", 0), Ok(0));
-        assert_eq!(lost("frame", 2), Ok(1));
+        assert_eq!(step("detections", 15), SequenceStep::First);
+        // A duplicate loses nothing; going back is a restart, not a gap.
+        assert_eq!(step("frame", 15), SequenceStep::Repeat);
+        assert_eq!(step("frame", 0), SequenceStep::Restart { from: 15, to: 0 });
+        assert_eq!(step("frame", 2), SequenceStep::Next { lost: 1 });
+    }
+
+    #[test]
+    fn refused_messages_do_not_move_the_sequence() {
+        let gate = InputGate::new("front", None);
+        let admit = |sequence| {
+            gate.check_at("keypoints", &header("front", sequence, NOW), NOW)
+                .unwrap();
+        };
+        admit(100);
+        assert_eq!(gate.sequence_step("keypoints", 100), SequenceStep::First);
+        // Admitted by its header, refused by the worker (1 byte short, 6 keypoints): never
+        // validated, so it moves nothing.
+        admit(100 + 1_000_000_000_000);
+        admit(101);
+        assert_eq!(
+            gate.sequence_step("keypoints", 101),
+            SequenceStep::Next { lost: 0 }
+        );
+        // 102 and 103 arrived (replaced in the slot, or refused later): not lost; 104 was.
+        for sequence in [102, 103, 105] {
+            admit(sequence);
+        }
+        assert_eq!(
+            gate.sequence_step("keypoints", 105),
+            SequenceStep::Next { lost: 1 }
+        );
+        // A validated jump beyond the bound is a restart, not 10^12 lost frames.
+        admit(105 + MAX_SEQUENCE_JUMP + 1);
+        assert_eq!(
+            gate.sequence_step("keypoints", 105 + MAX_SEQUENCE_JUMP + 1),
+            SequenceStep::Restart {
+                from: 105,
+                to: 105 + MAX_SEQUENCE_JUMP + 1
+            }
+        );
+        admit(105 + 2 * MAX_SEQUENCE_JUMP);
+        assert_eq!(
+            gate.sequence_step("keypoints", 105 + 2 * MAX_SEQUENCE_JUMP),
+            SequenceStep::Next {
+                lost: MAX_SEQUENCE_JUMP - 2
+            }
+        );
     }
 }

@@ -279,7 +279,8 @@ impl Node {
     /// thread (counted as received, marking the input fresh for `/readyz`): no channel or async
     /// task in between, so a hop costs one thread wake-up. The worker's slot keeps the newest
     /// sample. The header is read first (not the rest) and checked by `gate`: a refused one is
-    /// counted and never reaches the worker; sequence gaps are counted as frames lost. A sample
+    /// counted and never reaches the worker; its sequence counts (gaps as frames lost) only once
+    /// the worker has validated the whole message ([`InputGate::validated`]). A sample
     /// whose header cannot be read goes on, so the worker's decode reports what is wrong. Keep
     /// the returned subscriber alive for as long as samples should flow.
     pub async fn feed_worker(

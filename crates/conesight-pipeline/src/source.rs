@@ -9,7 +9,7 @@ use conesight_core::{Camera, Extrinsics};
 use conesight_sim::frames::{FrameParams, Layout, Sequence};
 use conesight_sim::labels::label_frame;
 use conesight_sim::render::Renderer;
-use image::{ImageReader, RgbImage};
+use image::RgbImage;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::error::PipelineError;
@@ -146,20 +146,19 @@ impl SyntheticSource {
     }
 }
 
-/// Reads an image file of any common format as RGB8.
+/// Reads a JPEG or PNG file as RGB8, whole: a truncated or corrupt file is an error
+/// ([`PipelineError::ImageDecode`], `conesight_vision::decode`), never an image filled in grey.
 pub fn read_image(path: &Path) -> Result<RgbImage, PipelineError> {
-    let error = |reason: String| PipelineError::ImageRead {
+    let data = std::fs::read(path).map_err(|e| PipelineError::ImageRead {
         path: path.to_path_buf(),
-        reason,
-    };
-    let reader = ImageReader::open(path)
-        .map_err(|e| error(e.to_string()))?
-        .with_guessed_format()
-        .map_err(|e| error(e.to_string()))?;
-    Ok(reader
-        .decode()
-        .map_err(|e| error(e.to_string()))?
-        .into_rgb8())
+        reason: e.to_string(),
+    })?;
+    conesight_vision::decode_rgb(&data, conesight_vision::DecodeLimits::default()).map_err(
+        |error| PipelineError::ImageDecode {
+            path: path.to_path_buf(),
+            error,
+        },
+    )
 }
 
 /// The image files of `dir` ([`IMAGE_EXTENSIONS`]), sorted by name.

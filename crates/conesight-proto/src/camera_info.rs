@@ -1,5 +1,6 @@
 //! Camera calibration: [`Camera`] and [`Extrinsics`] to and from `pb::CameraInfo`.
 
+use conesight_core::bounds::{self, BoundsError};
 use conesight_core::{Camera, Distortion, DistortionModel, Extrinsics};
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
 
@@ -141,7 +142,9 @@ impl TryFrom<&pb::CameraInfo> for Camera {
     type Error = ProtoError;
 
     /// Checks image size (1..=[`MAX_IMAGE_SIDE_PX`]), positive finite focal lengths, finite
-    /// principal point and distortion; absent distortion means none.
+    /// principal point and distortion (absent distortion means none), then their plausibility
+    /// ([`conesight_core::bounds::check_camera`]: field of view, principal point in the image,
+    /// distortion one-to-one over it).
     fn try_from(info: &pb::CameraInfo) -> Result<Self, ProtoError> {
         let side_max = f64::from(MAX_IMAGE_SIDE_PX);
         in_range("width_px", f64::from(info.width_px), 1.0, side_max)?;
@@ -151,7 +154,7 @@ impl TryFrom<&pb::CameraInfo> for Camera {
             Some(d) => Distortion::try_from(d).map_err(|e| e.within("distortion"))?,
             None => Distortion::NONE,
         };
-        Ok(Self {
+        let camera = Self {
             width_px: info.width_px,
             height_px: info.height_px,
             fx_px: focal("fx_px", info.fx_px)?,
@@ -159,7 +162,19 @@ impl TryFrom<&pb::CameraInfo> for Camera {
             cx_px: finite("cx_px", info.cx_px)?,
             cy_px: finite("cy_px", info.cy_px)?,
             distortion,
-        })
+        };
+        bounds::check_camera(&camera).map_err(|error| {
+            let field = match &error {
+                BoundsError::FieldOfView { focal, .. } => *focal,
+                BoundsError::PrincipalPoint { field, .. } => *field,
+                _ => "distortion",
+            };
+            ProtoError::Implausible {
+                field: field.to_owned(),
+                error,
+            }
+        })?;
+        Ok(camera)
     }
 }
 
@@ -218,6 +233,20 @@ mod tests {
             Camera::try_from(&info).unwrap().distortion,
             Distortion::NONE
         );
+        for (field, value, kind) in [
+            ("fx_px", 1.0, "implausible_focal_length"),
+            ("fx_px", 200.0, "implausible_focal_length"),
+            ("cx_px", -5000.0, "implausible_principal_point"),
+        ] {
+            let mut absurd = info.clone();
+            match field {
+                "fx_px" => absurd.fx_px = value,
+                _ => absurd.cx_px = value,
+            }
+            let error = Camera::try_from(&absurd).unwrap_err();
+            assert_eq!(error.kind(), kind, "{error}");
+            assert!(error.to_string().contains(field), "{error}");
+        }
         if let Some(pose) = info.vehicle_from_camera.as_mut() {
             pose.rotation_w = 2.0;
         }

@@ -116,6 +116,30 @@ impl pb::Detections {
             ConeDetection::try_from(d)
         })
     }
+
+    /// [`Self::to_core`], then every box checked against the `(width, height)` of the frame it
+    /// was found in ([`conesight_core::bounds::check_box`]): one implausible box refuses the
+    /// message, the error names it (`detections[3].box`).
+    pub fn to_core_in_frame(&self, frame_px: (u32, u32)) -> Result<Vec<ConeDetection>, ProtoError> {
+        let detections = self.to_core()?;
+        for (index, detection) in detections.iter().enumerate() {
+            check_box_in_frame(&detection.box_px, frame_px)
+                .map_err(|e| e.within("box").in_item("detections", index))?;
+        }
+        Ok(detections)
+    }
+}
+
+/// A box within the plausibility bounds of a frame, as a [`ProtoError::Implausible`].
+pub(crate) fn check_box_in_frame(b: &PixelBox, frame_px: (u32, u32)) -> Result<(), ProtoError> {
+    let edges = [b.x_min_px, b.y_min_px, b.x_max_px, b.y_max_px];
+    conesight_core::bounds::check_box(edges, frame_px).map_err(|error| {
+        // `within` prefixes the path; the box itself is the element.
+        ProtoError::Implausible {
+            field: String::new(),
+            error,
+        }
+    })
 }
 
 #[cfg(test)]

@@ -91,6 +91,17 @@ pub enum ProtoError {
         /// The codec's message.
         reason: String,
     },
+    /// An encoded image (a JPEG frame) is truncated, corrupt or unsupported.
+    #[error("{0}")]
+    Image(#[from] conesight_vision::DecodeError),
+    /// A number is finite but physically implausible (`conesight_core::bounds`).
+    #[error("`{field}`: {error}")]
+    Implausible {
+        /// Path of the field (the element named: `cones[3].keypoints[2].u_px`).
+        field: String,
+        /// The bound it breaks.
+        error: conesight_core::bounds::BoundsError,
+    },
     /// A message does not fit the buffer it is encoded into (a publisher's payload buffer).
     #[error(
         "the encoded message needs {needed_bytes} bytes but the buffer has {available_bytes};          allocate `encoded_len_with_pixels` bytes"
@@ -117,13 +128,19 @@ impl ProtoError {
             Self::ImageSize { .. } => "image_size",
             Self::Jpeg { .. } => "jpeg",
             Self::BufferTooSmall { .. } => "buffer_too_small",
+            Self::Image(error) => error.kind(),
+            Self::Implausible { error, .. } => error.kind(),
         }
     }
 
     /// The same error, with its field path prefixed by `prefix.` (e.g. `header.`).
     pub fn within(mut self, prefix: &str) -> Self {
         if let Some(field) = self.field_mut() {
-            *field = format!("{prefix}.{field}");
+            *field = if field.is_empty() {
+                prefix.to_owned()
+            } else {
+                format!("{prefix}.{field}")
+            };
         }
         self
     }
@@ -142,8 +159,12 @@ impl ProtoError {
             | Self::WrongCount { field, .. }
             | Self::TooMany { field, .. }
             | Self::UnknownEnum { field, .. }
-            | Self::InvalidString { field, .. } => Some(field),
-            Self::ImageSize { .. } | Self::Jpeg { .. } | Self::BufferTooSmall { .. } => None,
+            | Self::InvalidString { field, .. }
+            | Self::Implausible { field, .. } => Some(field),
+            Self::ImageSize { .. }
+            | Self::Jpeg { .. }
+            | Self::BufferTooSmall { .. }
+            | Self::Image(_) => None,
         }
     }
 }

@@ -1,9 +1,8 @@
 //! Image frames: raw RGB8/BGR8 or JPEG, checked against their dimensions.
 
-use std::io::Cursor;
-
 use bytes::{BufMut, Bytes};
-use image::{ImageBuffer, ImageFormat, ImageReader, Limits, Rgb, RgbImage};
+use conesight_vision::DecodeLimits;
+use image::{ImageBuffer, Rgb, RgbImage};
 use prost::Message;
 use prost::encoding::{WireType, encode_key, encode_varint, encoded_len_varint, key_len};
 
@@ -18,10 +17,6 @@ pub type SharedRgbImage = ImageBuffer<Rgb<u8>, Bytes>;
 
 /// Field number of `ImageFrame.data` (proto/conesight/v1/frame.proto).
 const DATA_FIELD: u32 = 5;
-
-/// Largest allocation the JPEG decoder may make: one RGB8 image at the largest side, plus slack.
-const JPEG_MAX_ALLOC_BYTES: u64 =
-    (MAX_IMAGE_SIDE_PX as u64) * (MAX_IMAGE_SIDE_PX as u64) * 4 + (1 << 20);
 
 impl pb::ImageFrame {
     /// A raw RGB8 frame holding a copy of `image`.
@@ -232,19 +227,14 @@ impl pb::ImageFrame {
     }
 }
 
-/// Decodes a JPEG to RGB8 with the decoder's dimension and allocation limits set.
+/// Decodes a whole JPEG to RGB8 within the dimension limits: a truncated or corrupt one is an
+/// error (`image_truncated`, `image_corrupt`), never a frame painted grey where data is
+/// missing (`conesight_vision::decode`).
 fn decode_jpeg(data: &[u8]) -> Result<RgbImage, ProtoError> {
-    let jpeg_error = |e: image::ImageError| ProtoError::Jpeg {
-        operation: "decode",
-        reason: e.to_string(),
+    let limits = DecodeLimits {
+        max_side_px: MAX_IMAGE_SIDE_PX,
     };
-    let mut reader = ImageReader::with_format(Cursor::new(data), ImageFormat::Jpeg);
-    let mut limits = Limits::default();
-    limits.max_image_width = Some(MAX_IMAGE_SIDE_PX);
-    limits.max_image_height = Some(MAX_IMAGE_SIDE_PX);
-    limits.max_alloc = Some(JPEG_MAX_ALLOC_BYTES);
-    reader.limits(limits);
-    Ok(reader.decode().map_err(jpeg_error)?.into_rgb8())
+    Ok(conesight_vision::decode::decode_jpeg(data, limits)?)
 }
 
 #[cfg(test)]
@@ -344,9 +334,16 @@ mod tests {
             lying.to_rgb(),
             Err(ProtoError::ImageSize { width_px: 65, .. })
         ));
-        let mut corrupt = frame;
+        let mut corrupt = frame.clone();
         corrupt.data = Bytes::from_static(b"\xff\xd8\xff garbage");
-        assert_eq!(corrupt.to_rgb().unwrap_err().kind(), "jpeg");
+        assert_eq!(corrupt.to_rgb().unwrap_err().kind(), "image_corrupt");
+        // Cut to its headers, to half, one byte short: truncated, never a grey frame.
+        for keep in [600, frame.data.len() / 2, frame.data.len() - 1] {
+            let mut cut = frame.clone();
+            cut.data = frame.data.slice(..keep);
+            let error = cut.to_rgb().unwrap_err();
+            assert_eq!(error.kind(), "image_truncated", "cut to {keep}: {error}");
+        }
     }
 
     #[test]

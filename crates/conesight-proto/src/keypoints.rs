@@ -4,7 +4,7 @@
 use conesight_core::{ConeObservation, KEYPOINT_COUNT};
 use nalgebra::Point2;
 
-use crate::detection::ConeDetection;
+use crate::detection::{ConeDetection, check_box_in_frame};
 use crate::error::ProtoError;
 use crate::pb;
 use crate::validate::{each, finite, in_range, present};
@@ -114,6 +114,36 @@ impl pb::Keypoints {
         crate::require_header(&self.header)?;
         each("cones", &self.cones, |k| ConeKeypoints::try_from(k))
     }
+
+    /// [`Self::to_core`], then every box and keypoint checked against the message's own frame
+    /// size (`conesight_core::bounds`: boxes at least 2 px on a side inside the frame,
+    /// keypoints within the frame plus a margin): one implausible element refuses the
+    /// message, the error names it (`cones[3].keypoints[2]`).
+    pub fn to_core_in_frame(&self) -> Result<Vec<ConeKeypoints>, ProtoError> {
+        let cones = self.to_core()?;
+        check_in_frame(&cones, (self.image_width_px, self.image_height_px))?;
+        Ok(cones)
+    }
+}
+
+/// The bounds part of [`pb::Keypoints::to_core_in_frame`], for cones already converted: every
+/// box and keypoint plausible in a frame of `frame_px` (width, height).
+pub fn check_in_frame(cones: &[ConeKeypoints], frame_px: (u32, u32)) -> Result<(), ProtoError> {
+    {
+        for (index, cone) in cones.iter().enumerate() {
+            check_box_in_frame(&cone.detection.box_px, frame_px)
+                .map_err(|e| e.within("detection.box").in_item("cones", index))?;
+            for (k, point) in cone.observation.keypoints_px.iter().enumerate() {
+                conesight_core::bounds::check_keypoint(point.x, point.y, frame_px).map_err(
+                    |error| ProtoError::Implausible {
+                        field: format!("cones[{index}].keypoints[{k}]"),
+                        error,
+                    },
+                )?;
+            }
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -172,6 +202,35 @@ mod tests {
         assert_eq!(message.to_core().unwrap_err().kind(), "out_of_range");
         message.cones[0].keypoints[2].confidence = 1.5;
         assert_eq!(message.to_core().unwrap_err().kind(), "out_of_range");
+        message.cones[0].keypoints[2].confidence = 0.5;
+        assert_eq!(
+            message.to_core_in_frame().unwrap(),
+            message.to_core().unwrap()
+        );
+        let mut far = message.clone();
+        far.cones[0].keypoints[4].u_px = 1e300;
+        assert!(far.to_core().is_ok(), "finite");
+        let error = far.to_core_in_frame().unwrap_err();
+        assert_eq!(error.kind(), "keypoint_outside_frame");
+        assert!(
+            error.to_string().contains("cones[0].keypoints[4]"),
+            "{error}"
+        );
+        let mut thin = message.clone();
+        let b = thin.cones[0]
+            .detection
+            .as_mut()
+            .unwrap()
+            .r#box
+            .as_mut()
+            .unwrap();
+        b.x_max_px = b.x_min_px + 1e-9;
+        let error = thin.to_core_in_frame().unwrap_err();
+        assert_eq!(error.kind(), "box_too_small");
+        assert!(
+            error.to_string().contains("cones[0].detection.box"),
+            "{error}"
+        );
         message.cones[0].keypoints.pop();
         assert!(matches!(
             message.to_core(),

@@ -39,7 +39,8 @@ pub use error::ProtoError;
 pub use frame::SharedRgbImage;
 pub use header::{is_valid_camera_id, now_ns, peek_header, require_header};
 pub use keypoints::{
-    ConeKeypoints, MAX_KEYPOINT_WEIGHT, confidence_from_weight, weight_from_confidence,
+    ConeKeypoints, MAX_KEYPOINT_WEIGHT, check_in_frame, confidence_from_weight,
+    weight_from_confidence,
 };
 
 /// Types generated from `proto/conesight/v1` (package `conesight.v1`); field docs there.

@@ -8,7 +8,8 @@
 //! | `conesight_shared_memory_messages_total` | counter | |
 //! | `conesight_shared_memory_published_total` | counter | |
 //! | `conesight_errors_total` | counter | `kind` |
-//! | `conesight_frames_lost_total` | counter | `stream`: gaps in the input's frame sequence |
+//! | `conesight_frames_lost_total` | counter | `stream`: gaps in the input's frame sequence (of messages that passed validation) |
+//! | `conesight_stream_restarts_total` | counter | `stream`: an input's sequence went back or jumped too far: a new stream (a restarted camera) |
 //! | `conesight_source_restarts_total` | counter | (camera) restarts of a source that failed, ended or stalled |
 //! | `conesight_stage_latency_seconds` | histogram | `stage` |
 //! | `conesight_queue_depth` | gauge | |
@@ -69,6 +70,7 @@ pub struct Metrics {
     shared_memory_published: Counter,
     errors: Family<OneLabel, Counter>,
     frames_lost: Family<OneLabel, Counter>,
+    stream_restarts: Family<OneLabel, Counter>,
     stage_latency: Family<OneLabel, Histogram, fn() -> Histogram>,
     queue_depth: Gauge,
     detections_masked: Counter,
@@ -131,6 +133,7 @@ impl Metrics {
         let shared_memory_published = Counter::default();
         let errors = Family::<OneLabel, Counter>::default();
         let frames_lost = Family::<OneLabel, Counter>::default();
+        let stream_restarts = Family::<OneLabel, Counter>::default();
         let stage_latency = Family::<OneLabel, Histogram, fn() -> Histogram>::new_with_constructor(
             latency_histogram,
         );
@@ -233,6 +236,11 @@ impl Metrics {
             frames_lost.clone(),
         );
         registry.register(
+            "stream_restarts",
+            "Input streams that started again: the frame sequence went back or jumped too far to be a gap (a restarted camera), by stream",
+            stream_restarts.clone(),
+        );
+        registry.register(
             "stage_latency_seconds",
             "Time spent per pipeline stage",
             stage_latency.clone(),
@@ -251,6 +259,7 @@ impl Metrics {
             shared_memory_published,
             errors,
             frames_lost,
+            stream_restarts,
             stage_latency,
             queue_depth,
             detections_masked,
@@ -392,6 +401,13 @@ impl Metrics {
         self.frames_lost
             .get_or_create(&[("stream", stream)])
             .inc_by(count);
+    }
+
+    /// Counts a restart of `stream`: its sequence went back or jumped too far to be a gap.
+    pub fn stream_restarted(&self, stream: &'static str) {
+        self.stream_restarts
+            .get_or_create(&[("stream", stream)])
+            .inc();
     }
 
     /// Records the time spent in `stage` (e.g. `decode`, `inference`, `pnp`, `end_to_end`).

@@ -7,6 +7,8 @@
 //! - [`crop`]: the keypoint patch rule. Entry function: [`crop::crop_patch`], which turns a
 //!   detector box into an 80x80 RGB patch and the [`crop::PatchTransform`] mapping keypoints
 //!   between patch and image.
+//! - [`decode`]: an encoded JPEG or PNG to RGB8, whole or an error ([`decode::decode_rgb`]:
+//!   truncated and corrupt images are refused, never painted grey).
 //! - [`sample`]: bilinear sampling of an RGB8 image at continuous pixel coordinates.
 //!
 //! Images are [`RgbBuffer`]s: `image::ImageBuffer<Rgb<u8>, C>` over any byte container `C`, so
@@ -19,9 +21,11 @@
 //! `camera_info` calibrations.
 
 pub mod crop;
+pub mod decode;
 pub mod sample;
 
 pub use crop::{CropError, CropParams, PatchTransform, PixelBox, crop_patch};
+pub use decode::{DecodeError, DecodeLimits, decode_rgb};
 
 /// An RGB8 image over any byte container `C` (`Vec<u8>` for `image::RgbImage`, `&[u8]`,
 /// `bytes::Bytes`); functions take `&RgbBuffer<C>` with `C: Deref<Target = [u8]>`.

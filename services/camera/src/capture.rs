@@ -175,7 +175,28 @@ pub async fn run(
         if let Some(publisher) = &boxes_publisher {
             let mut header = header.clone();
             header.stamp_publish();
-            let detections = pb::Detections::new(header, &item.boxes);
+            // Clipped to the frame, slivers dropped: the bounds every consumer checks.
+            let frame_px = item.frame.image.dimensions();
+            let boxes: Vec<_> = item
+                .boxes
+                .iter()
+                .filter_map(|d| {
+                    let b = &d.box_px;
+                    let edges = [b.x_min_px, b.y_min_px, b.x_max_px, b.y_max_px];
+                    let [x_min_px, y_min_px, x_max_px, y_max_px] =
+                        conesight_core::bounds::clip_box(edges, frame_px)?;
+                    Some(conesight_proto::ConeDetection {
+                        box_px: conesight_vision::PixelBox {
+                            x_min_px,
+                            y_min_px,
+                            x_max_px,
+                            y_max_px,
+                        },
+                        ..*d
+                    })
+                })
+                .collect();
+            let detections = pb::Detections::new(header, &boxes);
             if let Err(error) = publisher.publish(encode(&detections)).await {
                 node.errors.report("publish", &error);
             }

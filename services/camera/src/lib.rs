@@ -192,6 +192,9 @@ impl CameraArgs {
         };
         let camera = Camera::from_calibration_file(path)
             .with_context(|| format!("reading --camera-info {}", path.display()))?;
+        // Every consumer refuses an implausible camera_info: say so here, once, at start.
+        conesight_core::bounds::check_camera(&camera)
+            .with_context(|| format!("--camera-info {}", path.display()))?;
         let extrinsics = match &self.extrinsics {
             Some(path) => Extrinsics::from_yaml_file(path)
                 .with_context(|| format!("reading --extrinsics {}", path.display()))?,

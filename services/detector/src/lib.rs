@@ -93,6 +93,8 @@ pub async fn run(args: &DetectorArgs, node: Node, shutdown: Shutdown) -> anyhow:
                 return;
             }
         };
+        // Whole and decoded: only now does its sequence count (gaps, restarts).
+        worker_gate.validated(node, "frame", &header);
         node.metrics.observe_stage("decode", started.elapsed());
         let inference = Instant::now();
         let covered = stage.coverage().map(|c| c.frame_px);

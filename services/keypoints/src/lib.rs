@@ -101,6 +101,7 @@ pub async fn run(args: &KeypointsArgs, node: Node, shutdown: Shutdown) -> anyhow
             let Some(frame) = node.decode::<pb::ImageFrame>(&sample, limit) else {
                 return;
             };
+            let frame_header = frame.header.clone();
             let image = match frame.into_shared_rgb() {
                 Ok(image) => image,
                 Err(error) => {
@@ -109,18 +110,42 @@ pub async fn run(args: &KeypointsArgs, node: Node, shutdown: Shutdown) -> anyhow
                     return;
                 }
             };
+            // Whole and decoded: only now does its sequence count (gaps, restarts).
+            if let Some(frame_header) = &frame_header {
+                worker_gate.validated(node, "frame", frame_header);
+            }
             node.metrics.observe_stage("decode", started.elapsed());
-            let (header, boxes) = match require_header(&detections.header)
-                .cloned()
-                .and_then(|header| Ok((header, detections.to_core()?)))
-            {
-                Ok(parts) => parts,
-                Err(error) => {
-                    node.metrics.frame_dropped();
-                    node.errors.report(error.kind(), &error);
-                    return;
-                }
-            };
+            // The message is all or nothing: more detections than the cap, or one box that
+            // is not a plausible box of this frame, refuses it whole (the box named).
+            if detections.detections.len() > max_cones {
+                node.metrics.frame_dropped();
+                node.errors.report(
+                    "too_many_detections",
+                    &format!(
+                        "a detections message with {} detections, more than the cap of \
+                         {max_cones} per frame (--max-cones), was refused whole",
+                        detections.detections.len()
+                    ),
+                );
+                return;
+            }
+            let (header, boxes) =
+                match require_header(&detections.header)
+                    .cloned()
+                    .and_then(|header| {
+                        Ok((
+                            header,
+                            detections.to_core_in_frame((image.width(), image.height()))?,
+                        ))
+                    }) {
+                    Ok(parts) => parts,
+                    Err(error) => {
+                        node.metrics.frame_dropped();
+                        node.errors.report(error.kind(), &error);
+                        return;
+                    }
+                };
+            worker_gate.validated(node, "detections", &header);
             let inference = Instant::now();
             let output = match stage.predict(&image, &boxes) {
                 Ok(output) => output,
@@ -131,18 +156,11 @@ pub async fn run(args: &KeypointsArgs, node: Node, shutdown: Shutdown) -> anyhow
                 }
             };
             node.metrics.observe_stage("inference", inference.elapsed());
-            for (index, error) in &output.rejected {
+            if let Some((index, error)) = output.rejected.first() {
+                node.metrics.frame_dropped();
                 node.errors
-                    .report("invalid_box", &format!("detection {index}: {error}"));
-            }
-            if output.over_cap > 0 {
-                node.errors.report(
-                    "too_many_detections",
-                    &format!(
-                        "{} detections over the cap of {max_cones} per frame were skipped (lowest scores)",
-                        output.over_cap
-                    ),
-                );
+                    .report("invalid_box", &format!("detections[{index}]: {error}"));
+                return;
             }
             // A pair that waited out a stall is not published late.
             if !worker_gate.still_fresh(node, "detections", &header) {

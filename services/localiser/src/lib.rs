@@ -146,6 +146,14 @@ pub async fn run(args: &LocaliserArgs, node: Node, shutdown: Shutdown) -> anyhow
             );
             return;
         }
+        // All or nothing: one implausible box or keypoint refuses the message, named.
+        if let Err(error) = conesight_proto::check_in_frame(&cones, frame_size_px) {
+            node.metrics.frame_dropped();
+            node.errors.report(error.kind(), &error);
+            return;
+        }
+        // Whole and plausible: only now does its sequence count (gaps, restarts).
+        worker_gate.validated(node, "keypoints", &header);
         if missing_extrinsics {
             node.errors.report(
                 "no_extrinsics",

@@ -210,8 +210,9 @@ async fn bad_input_is_counted_by_kind_and_survived() {
     }
     assert!(missing.is_empty(), "not counted: {missing:?}");
     assert!(recovered, "a good frame after the bad input gave no cones");
-    // 0 detections is a valid frame: it was processed and gave an (empty) keypoints message.
-    assert!(cluster.metric("keypoints", "conesight_frames_processed_total") >= 3.0);
+    // 0 detections is a valid frame: it was processed and gave an (empty) keypoints message,
+    // as did the good frame; 500 detections (over the cap) are refused whole (issue 40).
+    assert!(cluster.metric("keypoints", "conesight_frames_processed_total") >= 2.0);
 }
 
 fn nalgebra_point() -> nalgebra::Point2<f64> {

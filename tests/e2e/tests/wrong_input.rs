@@ -180,9 +180,9 @@ async fn wrong_inputs_are_counted_and_never_published() {
         recovered,
         "good keypoints after the wrong ones gave no cones"
     );
-    // Refused inputs do not move the sequence; 15 (wrong size, but a good header) did:
-    // 15 -> 100 loses 84, 100 -> 105 loses 4.
-    assert_eq!(lost, 88.0, "frames lost");
+    // Only validated inputs move the sequence (issue 40): 15 (wrong size, a good header) is
+    // refused, so 100 starts the count and 100 -> 105 loses 4.
+    assert_eq!(lost, 4.0, "frames lost");
 }
 
 /// Seven keypoints spread over a cone's box (apex, stripe edges, bases), enough for a pose.
