@@ -134,11 +134,15 @@ REAL_BOXES := $(if $(wildcard ../shared/data/real-train/fsoco-boxes/data.yaml),-
 eval: setup
 	@start=$$(date +%s); set -e; \
 	cargo build --release -p conesight-eval; \
+	cargo build --release -p conesight-sim --example sim; \
+	rm -rf build/eval/cone-free; \
+	./target/release/examples/sim --frames 100 --seed 103 --no-cones --format json \
+	  --image-type jpg --quiet --out build/eval/cone-free; \
 	./target/release/conesight-eval --out build/eval --patches-out build/eval/patches \
 	  $(EVAL_MODELS) --detector models/detector.onnx $(REAL_BOXES); \
 	PYTHONPATH=training $(PY) -m conesight_train.report --records build/eval --docs docs \
 	  --synthetic-patches build/eval/patches $(REPORT_MODELS) \
-	  --command "make eval" --started-at $$start; \
+	  --cone-free build/eval/cone-free --command "make eval" --started-at $$start; \
 	echo "make eval: $$(( $$(date +%s) - start )) s"
 
 ## The cheap subset of `make eval` against the committed docs/results.json (CI runs it).

@@ -1,5 +1,5 @@
-//! Stand-in for `conesight sim` until the CLI crate wires it:
-//! `cargo run --release -p conesight-sim --example sim -- --frames 10 --out out/sim`.
+//! `conesight sim` without building the whole CLI (`make eval` renders its cone-free frames
+//! with it): `cargo run --release -p conesight-sim --example sim -- --frames 10 --out out/sim`.
 
 use clap::Parser;
 

@@ -15,7 +15,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 
 use crate::{
-    frames::{FrameParams, Layout, Sequence, random_frame},
+    frames::{FrameParams, Layout, Sequence, cone_free_frame, random_frame},
     labels::label_frame,
     render::Renderer,
     scene::Scene,
@@ -31,6 +31,11 @@ pub struct SimArgs {
     /// Number of random frames.
     #[arg(long, default_value_t = 100)]
     pub frames: u64,
+    /// Frames that hold no cone: the cones taken away, people, signs, barrels, boxes and tyre
+    /// stacks (mostly in the cones' colours) put on and beside the road instead; every
+    /// detection on them is a false cone (`make eval`'s false cones per frame).
+    #[arg(long)]
+    pub no_cones: bool,
     /// Shared options.
     #[command(flatten)]
     pub common: CommonArgs,
@@ -122,7 +127,11 @@ pub fn run(args: SimArgs) -> anyhow::Result<()> {
             let renderer = Renderer::new(params.camera).context("preparing the camera")?;
             let seed = common.seed;
             generate(common, &renderer, args.frames, |index| {
-                random_frame(seed, index, &params)
+                if args.no_cones {
+                    cone_free_frame(seed, index, &params)
+                } else {
+                    random_frame(seed, index, &params)
+                }
             })
         }
     }

@@ -160,6 +160,26 @@ pub fn random_frame(seed: u64, frame_index: u64, params: &FrameParams) -> Scene 
     }
 }
 
+/// Frame `frame_index` of the data set `seed` with every cone taken away and props put on and
+/// beside the road instead (`scene::place_props`: people, signs, barrels, boxes, tyre stacks,
+/// mostly in the cones' colours): every detection on it is a false cone.
+pub fn cone_free_frame(seed: u64, frame_index: u64, params: &FrameParams) -> Scene {
+    let mut scene = random_frame(seed, frame_index, params);
+    let mut world = (*scene.world).clone();
+    world.cones.clear();
+    let camera = scene.world_from_camera();
+    let forward = camera.rotation * Vector3::z();
+    let heading = forward.y.atan2(forward.x);
+    let position = nalgebra::Point2::new(camera.translation.x, camera.translation.y);
+    world.distractors.extend(crate::scene::place_props(
+        position,
+        heading,
+        &mut stream(seed, frame_index, Purpose::Props),
+    ));
+    scene.world = Arc::new(world);
+    scene
+}
+
 /// A camera driving a track's centreline.
 #[derive(Debug, Clone)]
 pub struct Sequence {

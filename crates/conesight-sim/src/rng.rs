@@ -26,6 +26,8 @@ pub enum Purpose {
     Camera = 6,
     /// Box jitter of training patches.
     Jitter = 7,
+    /// The props of a cone-free frame (`frames::cone_free_frame`).
+    Props = 8,
 }
 
 /// The stream for `(seed, frame_index, purpose)`.

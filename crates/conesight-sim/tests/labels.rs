@@ -12,7 +12,7 @@ use conesight_core::{
 };
 use conesight_sim::{
     cli::scaled_camera,
-    frames::{FrameParams, random_frame},
+    frames::{FrameParams, cone_free_frame, random_frame},
     labels::{ConeLabel, FrameLabels, label_frame},
     render::{Rendered, Renderer},
     rng::{Purpose, stream},
@@ -249,4 +249,54 @@ fn frames_are_deterministic_across_thread_counts() {
     assert_eq!(a.object_ids, b.object_ids);
     let other = renderer.render(&random_frame(11, 4, &params)).unwrap();
     assert_ne!(a.image, other.image);
+}
+
+#[test]
+fn cone_free_frames_hold_no_cone_and_show_their_props() {
+    let params = FrameParams {
+        camera: scaled_camera(0.25).unwrap(),
+        ..FrameParams::default()
+    };
+    let renderer = Renderer::new(params.camera).unwrap();
+    let mut signs_seen = 0;
+    for index in 0..6 {
+        let scene = cone_free_frame(5, index, &params);
+        assert!(scene.world.cones.is_empty());
+        let rendered = renderer.render(&scene).unwrap();
+        let labels = label_frame(&renderer, &scene, &rendered);
+        assert!(
+            labels.cones.is_empty(),
+            "frame {index}: {} cones",
+            labels.cones.len()
+        );
+        // The props stand ahead of the camera: some of their pixels are in the image.
+        let props: std::collections::BTreeSet<u32> = rendered
+            .object_ids
+            .iter()
+            .copied()
+            .filter(|&id| id > 0)
+            .collect();
+        assert!(!props.is_empty(), "frame {index} shows no prop");
+        signs_seen += scene
+            .world
+            .distractors
+            .iter()
+            .enumerate()
+            .filter(|(i, d)| {
+                matches!(d.shape, DistractorShape::Sign { .. }) && props.contains(&(*i as u32 + 1))
+            })
+            .count();
+    }
+    assert!(signs_seen > 0, "no sign was in view in 6 frames");
+    // The same seed and index give the same frame; the cone-free frame keeps the random frame's
+    // camera, light and ground.
+    let a = cone_free_frame(5, 2, &params);
+    assert_eq!(
+        a.world.distractors,
+        cone_free_frame(5, 2, &params).world.distractors
+    );
+    assert_eq!(
+        a.world_from_vehicle,
+        random_frame(5, 2, &params).world_from_vehicle
+    );
 }

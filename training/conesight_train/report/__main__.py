@@ -348,6 +348,12 @@ def main(argv: list[str] | None = None) -> int:
         "--detector", type=Path, default=REPO_ROOT / "models/detector.onnx", help="for real frames"
     )
     parser.add_argument(
+        "--cone-free",
+        type=Path,
+        default=REPO_ROOT / "build/eval/cone-free",
+        help="rendered frames with no cone (conesight sim --no-cones): false cones per frame",
+    )
+    parser.add_argument(
         "--real-frames",
         type=Path,
         default=REPO_ROOT.parent / "shared/data/real-train/fsoco-boxes/test",
@@ -468,7 +474,12 @@ def main(argv: list[str] | None = None) -> int:
     from conesight_train.report.real_detector import real_detection
 
     real_det = json_safe(
-        real_detection(args.detector, args.real_frames, args.records / "real-detections")
+        real_detection(
+            args.detector,
+            args.real_frames,
+            args.records / "real-detections",
+            cone_free=args.cone_free,
+        )
     )
     if not real_det["available"]:
         missing.append(f"detector on real frames: {real_det['reason']}")

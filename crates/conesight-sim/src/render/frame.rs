@@ -13,6 +13,9 @@ use super::{
 };
 use crate::scene::{DistractorShape, Scene};
 
+/// Radius of a sign's pole, metres (the shading tells pole from plate by height).
+pub(crate) const SIGN_POLE_RADIUS_M: f64 = 0.025;
+
 /// Everything a ray needs for one frame.
 pub(super) struct Frame<'a> {
     pub(super) scene: &'a Scene,
@@ -91,6 +94,27 @@ impl Renderer {
             match distractor.shape {
                 DistractorShape::Box { half_extents_m } => parts.push(Solid::Cuboid {
                     half_m: half_extents_m,
+                    z0_m: 0.0,
+                }),
+                DistractorShape::Sign {
+                    width_m,
+                    height_m,
+                    pole_m,
+                } => {
+                    parts.push(Solid::Cylinder {
+                        radius_m: SIGN_POLE_RADIUS_M,
+                        z0_m: 0.0,
+                        z1_m: pole_m,
+                    });
+                    parts.push(Solid::Cuboid {
+                        half_m: [0.5 * width_m, 0.012, 0.5 * height_m],
+                        z0_m: pole_m,
+                    });
+                }
+                DistractorShape::Barrel { radius_m, height_m } => parts.push(Solid::Cylinder {
+                    radius_m,
+                    z0_m: 0.0,
+                    z1_m: height_m,
                 }),
                 DistractorShape::Pole { radius_m, height_m } => parts.push(Solid::Cylinder {
                     radius_m,
@@ -127,12 +151,12 @@ impl Renderer {
                     objects.push(placed);
                 }
                 let points: Vec<Point3<f64>> = match solid {
-                    Solid::Cuboid { half_m } => (0..8)
+                    Solid::Cuboid { half_m, z0_m } => (0..8)
                         .map(|i| {
                             Point3::new(
                                 if i & 1 == 0 { -half_m[0] } else { half_m[0] },
                                 if i & 2 == 0 { -half_m[1] } else { half_m[1] },
-                                if i & 4 == 0 { 0.0 } else { 2.0 * half_m[2] },
+                                z0_m + if i & 4 == 0 { 0.0 } else { 2.0 * half_m[2] },
                             )
                         })
                         .collect(),

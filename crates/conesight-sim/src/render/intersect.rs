@@ -32,11 +32,11 @@ pub fn intersect_solid(solid: &Solid, o: &Vector3<f64>, d: &Vector3<f64>) -> Opt
             });
             nearest(nearest(body, cap), plate)
         }
-        Solid::Cuboid { half_m } => intersect_box(
+        Solid::Cuboid { half_m, z0_m } => intersect_box(
             o,
             d,
-            [-half_m[0], -half_m[1], 0.0],
-            [half_m[0], half_m[1], 2.0 * half_m[2]],
+            [-half_m[0], -half_m[1], z0_m],
+            [half_m[0], half_m[1], z0_m + 2.0 * half_m[2]],
         ),
         Solid::Cylinder {
             radius_m,
@@ -240,6 +240,7 @@ mod tests {
     fn boxes_cylinders_spheres() {
         let cuboid = Solid::Cuboid {
             half_m: [1.0, 1.0, 0.5],
+            z0_m: 0.0,
         };
         let hit = intersect_solid(&cuboid, &Vector3::new(-3.0, 0.0, 0.5), &Vector3::x()).unwrap();
         assert!((hit.t - 2.0).abs() < 1e-12);

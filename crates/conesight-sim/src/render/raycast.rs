@@ -39,10 +39,12 @@ pub enum Solid {
         /// Thickness of the base plate.
         plate_m: f64,
     },
-    /// Box `[-hx, hx] x [-hy, hy] x [0, 2 hz]`.
+    /// Box `[-hx, hx] x [-hy, hy] x [z0, z0 + 2 hz]`.
     Cuboid {
         /// Half extents.
         half_m: [f64; 3],
+        /// Height of its bottom face (0: standing on the ground).
+        z0_m: f64,
     },
     /// Vertical cylinder from z0 to z1.
     Cylinder {
@@ -87,9 +89,9 @@ impl Solid {
                 let r = r0.max(plate_half_m);
                 ([-r, -r, 0.0], [r, r, top_m])
             }
-            Self::Cuboid { half_m } => (
-                [-half_m[0], -half_m[1], 0.0],
-                [half_m[0], half_m[1], 2.0 * half_m[2]],
+            Self::Cuboid { half_m, z0_m } => (
+                [-half_m[0], -half_m[1], z0_m],
+                [half_m[0], half_m[1], z0_m + 2.0 * half_m[2]],
             ),
             Self::Cylinder {
                 radius_m,

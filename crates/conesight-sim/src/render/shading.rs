@@ -168,6 +168,16 @@ impl Frame<'_> {
             }
             DistractorShape::Person { .. } if hit.part == Part::Head => albedo = [0.35, 0.2, 0.13],
             DistractorShape::Person { .. } if hit.point.z < 0.8 => albedo = [0.03, 0.03, 0.05],
+            // The pole (below the plate) is grey metal; the plate's back is grey too.
+            DistractorShape::Sign { pole_m, .. } if hit.point.z < pole_m || hit.normal.y > 0.5 => {
+                albedo = [0.25, 0.25, 0.26]
+            }
+            DistractorShape::Barrel { height_m, .. } if albedo[0] > 2.0 * albedo[2] => {
+                let z = hit.point.z / height_m;
+                if (0.3..0.4).contains(&z) || (0.6..0.7).contains(&z) {
+                    albedo = [0.7, 0.7, 0.68];
+                }
+            }
             _ => {}
         }
         let grain = 0.85

@@ -20,6 +20,7 @@ use conesight_core::{Camera, Extrinsics};
 use nalgebra::{Isometry3, Point3};
 use serde::Serialize;
 
+pub use surroundings::place_props;
 pub use track::{Track, TrackCone};
 pub use world::{
     ConeAppearance, Distractor, DistractorShape, Environment, GroundKind, PaintedLine, SceneCone,

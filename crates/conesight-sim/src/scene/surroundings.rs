@@ -90,6 +90,77 @@ pub(super) fn place_distractors(
     out
 }
 
+/// Things that are not cones, for frames that hold none (`frames::cone_free_frame`): people in
+/// cone-coloured clothes, road and advertising signs, barrels, boxes and tyre stacks, standing
+/// on or beside the road `3..30` m ahead of the camera at `camera_m` looking along
+/// `heading_rad`. Colours favour the cones' blue, yellow and orange: the false cones to measure.
+pub fn place_props(
+    camera_m: Point2<f64>,
+    heading_rad: f64,
+    rng: &mut ChaCha8Rng,
+) -> Vec<Distractor> {
+    const CONE_COLOURS: [[f32; 3]; 4] = [
+        [0.02, 0.05, 0.25], // blue
+        [0.60, 0.45, 0.02], // yellow
+        [0.60, 0.15, 0.01], // orange
+        [0.45, 0.04, 0.03], // red
+    ];
+    let count = rng.random_range(4..12);
+    let (sin, cos) = heading_rad.sin_cos();
+    (0..count)
+        .map(|_| {
+            let ahead = rng.random_range(3.0..30.0);
+            let side = rng.random_range(-0.35..0.35) * ahead + rng.random_range(-2.0..2.0);
+            let p = camera_m + Vector2::new(cos * ahead - sin * side, sin * ahead + cos * side);
+            let shape = match rng.random_range(0..6) {
+                0 | 1 => DistractorShape::Sign {
+                    width_m: rng.random_range(0.4..1.2),
+                    height_m: rng.random_range(0.4..1.0),
+                    pole_m: rng.random_range(0.0..2.0),
+                },
+                2 => DistractorShape::Barrel {
+                    radius_m: rng.random_range(0.25..0.32),
+                    height_m: rng.random_range(0.85..1.0),
+                },
+                3 => DistractorShape::Person {
+                    height_m: rng.random_range(1.55..1.95),
+                },
+                4 => DistractorShape::Box {
+                    half_extents_m: [
+                        rng.random_range(0.1..0.5),
+                        rng.random_range(0.1..0.5),
+                        rng.random_range(0.1..0.4),
+                    ],
+                },
+                _ => DistractorShape::TyreStack {
+                    radius_m: rng.random_range(0.28..0.36),
+                    tyres: rng.random_range(1..5),
+                },
+            };
+            let albedo = match shape {
+                DistractorShape::TyreStack { .. } => [0.025, 0.025, 0.027],
+                _ if rng.random_bool(0.7) => CONE_COLOURS[rng.random_range(0..CONE_COLOURS.len())],
+                _ => PALETTE[rng.random_range(0..PALETTE.len())],
+            };
+            // Signs mostly face the camera (their plate's normal is the object's y axis).
+            let yaw = match shape {
+                DistractorShape::Sign { .. } => {
+                    heading_rad - std::f64::consts::FRAC_PI_2 + rng.random_range(-0.6..0.6)
+                }
+                _ => rng.random_range(0.0..std::f64::consts::TAU),
+            };
+            Distractor {
+                world_from_object: Isometry3::from_parts(
+                    Translation3::new(p.x, p.y, 0.0),
+                    UnitQuaternion::from_axis_angle(&Vector3::z_axis(), yaw),
+                ),
+                shape,
+                albedo,
+            }
+        })
+        .collect()
+}
+
 /// Distractor colours (linear albedo), including cone-like blue, yellow and orange clothing
 /// and boxes as hard negatives.
 const PALETTE: [[f32; 3]; 10] = [

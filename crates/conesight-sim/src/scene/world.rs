@@ -107,6 +107,22 @@ pub enum DistractorShape {
         /// Height, metres.
         height_m: f64,
     },
+    /// A road or advertising sign: a flat plate facing its own y axis on a thin grey pole.
+    Sign {
+        /// Plate width, metres.
+        width_m: f64,
+        /// Plate height, metres.
+        height_m: f64,
+        /// Height of the plate's bottom edge (the pole's top), metres.
+        pole_m: f64,
+    },
+    /// A drum or barrel standing on the ground, with two white bands when orange or red.
+    Barrel {
+        /// Radius, metres.
+        radius_m: f64,
+        /// Height, metres.
+        height_m: f64,
+    },
 }
 
 /// A distractor object.
