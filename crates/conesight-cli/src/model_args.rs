@@ -37,6 +37,16 @@ pub struct ModelArgs {
         default_value_t
     )]
     execution_provider: conesight_onnx::ExecutionProvider,
+    /// Which copy of the shipped networks runs: `fp32`, or `int8` (`models/*.int8.onnx`; same
+    /// accuracy on the real splits, the keypoint network 1.7x faster here: models/*.md). A
+    /// `--detector`/`--keypoint-model` path is used as given.
+    #[arg(
+        long = "precision",
+        env = "CONESIGHT_PRECISION",
+        value_enum,
+        default_value_t
+    )]
+    precision: conesight_pipeline::Precision,
     /// Your cones' sizes and keypoint heights, per size or class (YAML: `small:`/`large:` or
     /// `blue:`.. with height_m, plate_half_width_m, plate_height_m, keypoint_heights_m {base,
     /// lower_stripe, upper_stripe, apex}, body_radius_m {base, apex}, scale); default: the
@@ -67,6 +77,7 @@ impl ModelArgs {
             on_ground_plane,
             ego_mask: self.ego_mask.as_deref().map(EgoMask::parse).transpose()?,
             cone_geometry: ConeGeometry::from_file_or_shipped(self.cone_geometry.as_deref())?,
+            precision: self.precision,
         })
     }
 }

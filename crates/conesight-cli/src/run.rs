@@ -19,7 +19,7 @@ use conesight_detector_service::DetectorArgs;
 use conesight_keypoints_service::KeypointsArgs;
 use conesight_localiser_service::LocaliserArgs;
 use conesight_pipeline::node::{CommonArgs, MAX_INPUT_AGE, OnnxArgs};
-use conesight_pipeline::{Node, Shutdown, locate_detector};
+use conesight_pipeline::{Node, Shutdown, locate_detector_at};
 use conesight_service::Readiness;
 use conesight_sim::frames::Layout;
 use conesight_sources::{SourceError, SourceSpec};
@@ -194,7 +194,7 @@ async fn run_async(args: RunArgs) -> anyhow::Result<()> {
     let shutdown = Shutdown::new();
     shutdown.trigger_on_signal();
     let has = |s: ServiceName| args.services.contains(&s);
-    let detector_path = locate_detector(args.detector.as_deref());
+    let detector_path = locate_detector_at(args.detector.as_deref(), args.onnx.precision);
     let synthetic = args.source == SourceSpec::Synthetic;
     let use_detector = match args.boxes {
         BoxSource::Detector => true,

@@ -225,6 +225,72 @@ fn predict_refuses_a_truncated_jpeg_by_name_and_processes_the_others() {
     assert!(stderr.contains("half.jpg"), "{stderr}");
 }
 
+/// `--precision int8` runs the shipped int8 copies (`models/*.int8.onnx`, issue 42): on a
+/// rendered frame they find the same cones as fp32 at ranges within a few per cent, and not the
+/// very same numbers (another network ran).
+#[test]
+fn predict_with_int8_precision_finds_the_cones_fp32_finds() {
+    let dir = TempDir::new("predict-int8");
+    render(&dir.0);
+    let image = dir.0.join("images/000000.png");
+    let camera = dir.0.join("camera_info/000000.yaml");
+    let ranges = |precision: &str| -> Vec<([f64; 4], f64)> {
+        let output = conesight(&[
+            "predict",
+            "--precision",
+            precision,
+            "--camera",
+            camera.to_str().unwrap(),
+            image.to_str().unwrap(),
+        ]);
+        assert!(output.status.success(), "{precision}: {output:?}");
+        json_lines(&output)[0]["cones"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter_map(|c| {
+                let b: Vec<f64> = c["bbox_px"]
+                    .as_array()?
+                    .iter()
+                    .filter_map(Value::as_f64)
+                    .collect();
+                Some(([b[0], b[1], b[2], b[3]], c["range_m"].as_f64()?))
+            })
+            .collect()
+    };
+    let (fp32, int8) = (ranges("fp32"), ranges("int8"));
+    assert!(fp32.len() >= 5, "fp32 placed {} cones", fp32.len());
+    // Each fp32 cone's int8 twin: the box whose centre is nearest.
+    let centre = |b: &[f64; 4]| [(b[0] + b[2]) / 2.0, (b[1] + b[3]) / 2.0];
+    let mut relative = Vec::new();
+    for (b, range) in &fp32 {
+        let c = centre(b);
+        let twin = int8.iter().min_by(|x, y| {
+            let d = |o: &[f64; 4]| (centre(o)[0] - c[0]).hypot(centre(o)[1] - c[1]);
+            d(&x.0).total_cmp(&d(&y.0))
+        });
+        if let Some((o, twin_range)) = twin {
+            let offset = (centre(o)[0] - c[0]).hypot(centre(o)[1] - c[1]);
+            if offset < 0.25 * (b[3] - b[1]).max(4.0) {
+                relative.push((twin_range - range).abs() / range);
+            }
+        }
+    }
+    relative.sort_by(f64::total_cmp);
+    eprintln!("int8 vs fp32 range differences: {relative:.4?}");
+    assert!(
+        relative.len() * 10 >= fp32.len() * 9,
+        "int8 found {} of fp32's {} cones",
+        relative.len(),
+        fp32.len()
+    );
+    assert!(relative[relative.len() / 2] < 0.03, "{relative:.4?}");
+    assert!(
+        relative.iter().any(|r| *r > 0.0),
+        "int8 gave fp32's very numbers"
+    );
+}
+
 #[test]
 fn predict_with_given_boxes_keeps_every_box() {
     let dir = TempDir::new("boxes");

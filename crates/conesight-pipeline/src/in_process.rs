@@ -14,7 +14,7 @@ use crate::detector_stage::DetectorStage;
 use crate::error::PipelineError;
 use crate::keypoint_stage::KeypointStage;
 use crate::localiser_stage::LocaliserStage;
-use crate::models::{locate_detector, locate_keypoint_model};
+use crate::models::{Precision, locate_detector, locate_detector_at, locate_keypoint_model_at};
 
 /// What to load.
 #[derive(Debug, Clone, Default)]
@@ -33,6 +33,8 @@ pub struct PipelineConfig {
     pub ego_mask: Option<EgoMask>,
     /// The cones' sizes and keypoint heights (`--cone-geometry`; the fitted defaults).
     pub cone_geometry: ConeGeometry,
+    /// Which copy of the shipped networks runs where no path is given (`--precision`).
+    pub precision: Precision,
 }
 
 /// Wall time of each stage for one frame.
@@ -91,12 +93,13 @@ impl InProcessPipeline {
         let detector = if config.without_detector {
             None
         } else {
-            let path = locate_detector(config.detector.as_deref());
+            let path = locate_detector_at(config.detector.as_deref(), config.precision);
             let mut stage = DetectorStage::load(&path, &config.onnx)?;
             stage.set_ego_mask(config.ego_mask.clone());
             Some(stage)
         };
-        let keypoint_model = locate_keypoint_model(config.keypoint_model.as_deref());
+        let keypoint_model =
+            locate_keypoint_model_at(config.keypoint_model.as_deref(), config.precision);
         Ok(Self {
             detector,
             keypoints: KeypointStage::load(&keypoint_model, &config.onnx)?,

@@ -47,7 +47,9 @@ pub use error::PipelineError;
 pub use in_process::{FrameResult, InProcessPipeline, PipelineConfig, StageTimings};
 pub use keypoint_stage::{KeypointOutput, KeypointStage};
 pub use localiser_stage::{LocaliserOutput, LocaliserStage};
-pub use models::{DEFAULT_DETECTOR_FILE, detector_is_trained, locate_detector};
+pub use models::{
+    DEFAULT_DETECTOR_FILE, Precision, detector_is_trained, locate_detector, locate_detector_at,
+};
 pub use node::{Node, Shutdown};
 pub use presence::{Manifest, Output, Presence};
 pub use source::{SourceFrame, SyntheticParams, SyntheticSource};

@@ -1,10 +1,72 @@
 //! Finding the shipped models in the checkout (flags override): `models/detector.onnx` here,
-//! `models/keypoints.onnx` in [`conesight_keypoints::locate_model`].
+//! `models/keypoints.onnx` in [`conesight_keypoints::locate_model`], and their int8 copies
+//! (`NAME.int8.onnx`, `make quantize`) by [`Precision`].
 
 use std::path::{Path, PathBuf};
 
 /// The shipped detector, relative to the checkout; its card is `models/detector.card.json`.
 pub const DEFAULT_DETECTOR_FILE: &str = "models/detector.onnx";
+
+/// Which copy of a shipped network runs (`--precision`): the fp32 export or its int8 copy
+/// (static QDQ quantization calibrated on real frames and crops, `models/*.int8.onnx`; accuracy
+/// against fp32 and speed in the model cards). An explicit `--model`/`--detector` path is used as
+/// given, whatever the precision.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum Precision {
+    /// The fp32 networks (`models/detector.onnx`, `models/keypoints.onnx`).
+    #[default]
+    Fp32,
+    /// Their int8 copies (`models/detector.int8.onnx`, `models/keypoints.int8.onnx`).
+    Int8,
+}
+
+impl Precision {
+    /// The shipped file of this precision for the fp32 file `fp32` (`models/x.onnx` ->
+    /// `models/x.int8.onnx`).
+    pub fn shipped_file(self, fp32: &str) -> String {
+        match self {
+            Self::Fp32 => fp32.to_owned(),
+            Self::Int8 => match fp32.strip_suffix(".onnx") {
+                Some(stem) => format!("{stem}.int8.onnx"),
+                None => format!("{fp32}.int8"),
+            },
+        }
+    }
+
+    /// `fp32` or `int8`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Fp32 => "fp32",
+            Self::Int8 => "int8",
+        }
+    }
+}
+
+/// The model to use: `explicit` when given, else `file` of `precision` under the checkout
+/// roots; the first existing file, or the default path when none exists (loading then names
+/// the missing file).
+fn locate(explicit: Option<&Path>, file: &str, precision: Precision) -> PathBuf {
+    if let Some(path) = explicit {
+        return path.to_path_buf();
+    }
+    let file = precision.shipped_file(file);
+    conesight_onnx::runtime::checkout_roots()
+        .into_iter()
+        .map(|root| root.join(&file))
+        .find(|candidate| candidate.is_file())
+        .unwrap_or_else(|| PathBuf::from(file))
+}
+
+/// [`locate_detector`] of `precision`: `models/detector.int8.onnx` for [`Precision::Int8`].
+pub fn locate_detector_at(explicit: Option<&Path>, precision: Precision) -> PathBuf {
+    locate(explicit, DEFAULT_DETECTOR_FILE, precision)
+}
+
+/// [`locate_keypoint_model`] of `precision`: `models/keypoints.int8.onnx` for
+/// [`Precision::Int8`].
+pub fn locate_keypoint_model_at(explicit: Option<&Path>, precision: Precision) -> PathBuf {
+    locate(explicit, conesight_keypoints::DEFAULT_MODEL_FILE, precision)
+}
 
 /// The detector to use: `explicit` when given, else `models/detector.onnx` under the checkout
 /// roots ([`conesight_onnx::runtime::checkout_roots`]); the first existing file, or the
@@ -43,6 +105,37 @@ pub fn locate_keypoint_model(explicit: Option<&Path>) -> PathBuf {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn int8_finds_the_shipped_int8_copies() {
+        assert_eq!(
+            Precision::Int8.shipped_file("models/detector.onnx"),
+            "models/detector.int8.onnx"
+        );
+        assert_eq!(
+            Precision::Fp32.shipped_file("models/detector.onnx"),
+            "models/detector.onnx"
+        );
+        let detector = locate_detector_at(None, Precision::Int8);
+        let keypoints = locate_keypoint_model_at(None, Precision::Int8);
+        assert!(
+            detector.ends_with("models/detector.int8.onnx"),
+            "{detector:?}"
+        );
+        assert!(
+            keypoints.ends_with("models/keypoints.int8.onnx"),
+            "{keypoints:?}"
+        );
+        assert!(
+            detector.is_file() && keypoints.is_file(),
+            "shipped in models/"
+        );
+        let explicit = Path::new("/somewhere/else.onnx");
+        assert_eq!(
+            locate_detector_at(Some(explicit), Precision::Int8),
+            explicit
+        );
+    }
 
     #[test]
     fn explicit_wins_and_random_init_cards_are_not_trained() {

@@ -19,7 +19,7 @@ use conesight_bus::zenoh::sample::Sample;
 use conesight_bus::{Stream, encode};
 use conesight_detect::EgoMask;
 use conesight_pipeline::node::{CommonArgs, OnnxArgs};
-use conesight_pipeline::{DetectorStage, Node, Shutdown, locate_detector};
+use conesight_pipeline::{DetectorStage, Node, Shutdown, locate_detector_at};
 use conesight_proto::{pb, require_header};
 use conesight_service::Worker;
 
@@ -58,7 +58,7 @@ impl DetectorArgs {
 /// Runs the detector until `shutdown`.
 pub async fn run(args: &DetectorArgs, node: Node, shutdown: Shutdown) -> anyhow::Result<()> {
     let camera = args.common.camera.as_str();
-    let path = locate_detector(args.model.as_deref());
+    let path = locate_detector_at(args.model.as_deref(), args.onnx.precision);
     let onnx = args.onnx.model_options(args.common.execution_provider);
     let ego_mask = args.ego_mask.as_deref().map(EgoMask::parse).transpose()?;
     let model_path = path.clone();

@@ -78,7 +78,10 @@ impl KeypointsArgs {
 /// Runs the keypoint service until `shutdown`.
 pub async fn run(args: &KeypointsArgs, node: Node, shutdown: Shutdown) -> anyhow::Result<()> {
     let camera = args.common.camera.as_str();
-    let path = conesight_pipeline::models::locate_keypoint_model(args.model.as_deref());
+    let path = conesight_pipeline::models::locate_keypoint_model_at(
+        args.model.as_deref(),
+        args.onnx.precision,
+    );
     let onnx = args.onnx.model_options(args.common.execution_provider);
     let max_cones = args.max_cones;
     let model_path = path.clone();
