@@ -208,6 +208,24 @@ async fn frames_in_cones_out_within_model_accuracy_then_restart_each_service() {
             );
             assert_eq!(cluster.pid(other), Some(pid), "{other} was restarted");
         }
+        if name == "camera" {
+            // The restarted camera counts from sequence 0 again: every frame consumer counts a
+            // new stream (issue 40), not lost frames.
+            for consumer in ["detector", "keypoints"] {
+                if cluster.pid(consumer).is_none() {
+                    continue;
+                }
+                let restarts = cluster.metric(
+                    consumer,
+                    "conesight_stream_restarts_total{stream=\"frame\"}",
+                );
+                println!("{consumer}: frame stream restarts {restarts}");
+                assert!(
+                    restarts >= 1.0,
+                    "{consumer} did not count the camera's restart"
+                );
+            }
+        }
     }
 
     // A camera that stalls (SIGSTOP for 1 s, after a whole loop of its frames is kept in shared
