@@ -14,6 +14,9 @@ use crate::{CAMERA_INFO_PERIOD, CameraArgs};
 
 /// Longest wait for one frame from a source, so shutdown is seen within it.
 const POLL_TIMEOUT: Duration = Duration::from_millis(100);
+/// The fastest a camera paced by its cones (`--rate-hz 0`) publishes, frames per second: FS
+/// cameras run at 20-60 Hz, and no peer's messages drive it past this.
+pub const MAX_PACED_RATE_HZ: f64 = 60.0;
 
 /// Publishes frames from `source` until `args.frames` are out, the source is finished (a
 /// video file or an image folder at its end without `--source-loop`) or `shutdown`. A frame
@@ -206,11 +209,17 @@ pub async fn run(
             wait_for_cones(
                 subscriber,
                 &node,
-                sequence,
+                &header,
                 Duration::from_millis(args.pace_timeout_ms),
                 &shutdown,
             )
             .await;
+            // Never faster than the ceiling, whatever answers: a peer cannot race the camera.
+            let floor = Duration::from_secs_f64(1.0 / MAX_PACED_RATE_HZ);
+            let since = started.elapsed();
+            if since < floor {
+                tokio::time::sleep(floor - since).await;
+            }
         }
         sequence += 1;
     }
@@ -298,7 +307,7 @@ impl<'a> SourceHealth<'a> {
 async fn wait_for_cones(
     subscriber: &conesight_bus::RingSubscriber,
     node: &Node,
-    sequence: u64,
+    frame: &pb::Header,
     timeout: Duration,
     shutdown: &Shutdown,
 ) {
@@ -310,9 +319,27 @@ async fn wait_for_cones(
             sample = subscriber.recv_async() => {
                 let Ok(sample) = sample else { return };
                 let Some(cones) = node.decode::<pb::Cones>(&sample, 1 << 20) else { continue };
-                if cones.header.as_ref().is_some_and(|h| h.frame_sequence >= sequence) {
+                // Only the cones of this very frame: its camera, sequence and acquisition stamp
+                // (a peer's cones of sequence u64::MAX drove the camera at 192 frames/s).
+                let Some(header) = cones.header.as_ref() else { continue };
+                if header.camera_id == frame.camera_id
+                    && header.frame_sequence == frame.frame_sequence
+                    && header.acquisition_time_ns == frame.acquisition_time_ns
+                {
                     return;
                 }
+                node.errors.report(
+                    "pace_foreign_cones",
+                    &format!(
+                        "cones of sequence {} (acquired {} ns) while waiting for those of frame \
+                         {} (acquired {} ns): not this camera's current frame, ignored for \
+                         pacing",
+                        header.frame_sequence,
+                        header.acquisition_time_ns,
+                        frame.frame_sequence,
+                        frame.acquisition_time_ns
+                    ),
+                );
             }
         }
     }

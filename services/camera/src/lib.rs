@@ -18,7 +18,9 @@
 //! first image is checked before anything starts) or a video file; a live camera is reported
 //! and started again (it may have come up in another mode). Synthetic and folder frames go
 //! out at `--rate-hz` or, with `--rate-hz 0`, as fast as the pipeline takes them (the next
-//! frame when the cones of the previous one arrive, or after `--pace-timeout-ms`); GStreamer
+//! frame when the cones of the previous one arrive, or after `--pace-timeout-ms`; only cones
+//! with that frame's sequence and acquisition stamp count, others are `pace_foreign_cones`, and
+//! never faster than 60 Hz); GStreamer
 //! sources at their own rate, stamped with the buffer's time (`capture`).
 //!
 //! A source that fails, ends or stalls (no frame for `--source-timeout-ms`) is reported
