@@ -70,6 +70,8 @@ pub enum SequenceStep {
 struct StreamState {
     /// The last validated sequence.
     last_valid: Option<u64>,
+    /// Its `stream_epoch` (0: unknown).
+    epoch: u64,
     /// Sequences admitted since (oldest first, at most [`ADMITTED_KEPT`]).
     admitted: VecDeque<u64>,
     /// When a restart of this stream was last logged.
@@ -175,12 +177,15 @@ impl InputGate {
         Ok(())
     }
 
-    /// The step from `stream`'s last validated sequence to `sequence`, a message that passed
-    /// every check; it becomes the last validated one.
-    pub fn sequence_step(&self, stream: &'static str, sequence: u64) -> SequenceStep {
+    /// The step from `stream`'s last validated sequence to `sequence` of camera run `epoch`
+    /// (`Header::stream_epoch`, 0 when unknown), a message that passed every check; it becomes
+    /// the last validated one. Another known epoch than the last one is a restart.
+    pub fn sequence_step(&self, stream: &'static str, sequence: u64, epoch: u64) -> SequenceStep {
         let mut streams = self.streams();
         let state = streams.entry(stream).or_default();
         let previous = state.last_valid.replace(sequence);
+        let new_epoch = epoch != 0 && state.epoch != 0 && epoch != state.epoch;
+        state.epoch = epoch;
         // Admitted ones in between arrived: they are not lost.
         let arrived = previous.map_or(0, |previous| {
             state
@@ -192,6 +197,10 @@ impl InputGate {
         state.admitted.retain(|s| *s > sequence);
         match previous {
             None => SequenceStep::First,
+            Some(previous) if new_epoch => SequenceStep::Restart {
+                from: previous,
+                to: sequence,
+            },
             Some(previous) if previous == sequence => SequenceStep::Repeat,
             Some(previous) if sequence < previous || sequence - previous > MAX_SEQUENCE_JUMP => {
                 SequenceStep::Restart {
@@ -255,7 +264,7 @@ impl InputGate {
     /// sequence counts. Gaps are counted as frames lost on `node`, a new stream as a restart
     /// (logged at most once per [`conesight_service::errors::DEFAULT_LOG_INTERVAL`]).
     pub fn validated(&self, node: &Node, stream: &'static str, header: &pb::Header) {
-        match self.sequence_step(stream, header.frame_sequence) {
+        match self.sequence_step(stream, header.frame_sequence, header.stream_epoch) {
             SequenceStep::Next { lost } if lost > 0 => node.metrics.frames_lost(stream, lost),
             SequenceStep::Restart { from, to } => {
                 node.metrics.stream_restarted(stream);
@@ -361,7 +370,7 @@ mod tests {
         let step = |stream, sequence| {
             gate.check_at(stream, &header("front", sequence, NOW), NOW)
                 .unwrap();
-            gate.sequence_step(stream, sequence)
+            gate.sequence_step(stream, sequence, 0)
         };
         assert_eq!(step("frame", 10), SequenceStep::First);
         assert_eq!(step("frame", 11), SequenceStep::Next { lost: 0 });
@@ -375,6 +384,30 @@ mod tests {
     }
 
     #[test]
+    fn another_camera_run_is_a_restart_whatever_the_sequence() {
+        let gate = InputGate::new("front", None);
+        assert_eq!(gate.sequence_step("frame", 40, 7), SequenceStep::First);
+        assert_eq!(
+            gate.sequence_step("frame", 41, 7),
+            SequenceStep::Next { lost: 0 }
+        );
+        // A camera that restarted and went on from a sequence near its old one.
+        assert_eq!(
+            gate.sequence_step("frame", 45, 9),
+            SequenceStep::Restart { from: 41, to: 45 }
+        );
+        assert_eq!(
+            gate.sequence_step("frame", 47, 9),
+            SequenceStep::Next { lost: 1 }
+        );
+        // An unknown epoch (0) says nothing.
+        assert_eq!(
+            gate.sequence_step("frame", 48, 0),
+            SequenceStep::Next { lost: 0 }
+        );
+    }
+
+    #[test]
     fn refused_messages_do_not_move_the_sequence() {
         let gate = InputGate::new("front", None);
         let admit = |sequence| {
@@ -382,13 +415,13 @@ mod tests {
                 .unwrap();
         };
         admit(100);
-        assert_eq!(gate.sequence_step("keypoints", 100), SequenceStep::First);
+        assert_eq!(gate.sequence_step("keypoints", 100, 0), SequenceStep::First);
         // Admitted by its header, refused by the worker (1 byte short, 6 keypoints): never
         // validated, so it moves nothing.
         admit(100 + 1_000_000_000_000);
         admit(101);
         assert_eq!(
-            gate.sequence_step("keypoints", 101),
+            gate.sequence_step("keypoints", 101, 0),
             SequenceStep::Next { lost: 0 }
         );
         // 102 and 103 arrived (replaced in the slot, or refused later): not lost; 104 was.
@@ -396,13 +429,13 @@ mod tests {
             admit(sequence);
         }
         assert_eq!(
-            gate.sequence_step("keypoints", 105),
+            gate.sequence_step("keypoints", 105, 0),
             SequenceStep::Next { lost: 1 }
         );
         // A validated jump beyond the bound is a restart, not 10^12 lost frames.
         admit(105 + MAX_SEQUENCE_JUMP + 1);
         assert_eq!(
-            gate.sequence_step("keypoints", 105 + MAX_SEQUENCE_JUMP + 1),
+            gate.sequence_step("keypoints", 105 + MAX_SEQUENCE_JUMP + 1, 0),
             SequenceStep::Restart {
                 from: 105,
                 to: 105 + MAX_SEQUENCE_JUMP + 1
@@ -410,7 +443,7 @@ mod tests {
         );
         admit(105 + 2 * MAX_SEQUENCE_JUMP);
         assert_eq!(
-            gate.sequence_step("keypoints", 105 + 2 * MAX_SEQUENCE_JUMP),
+            gate.sequence_step("keypoints", 105 + 2 * MAX_SEQUENCE_JUMP, 0),
             SequenceStep::Next {
                 lost: MAX_SEQUENCE_JUMP - 2
             }

@@ -47,6 +47,7 @@ impl pb::Header {
             acquisition_time_ns,
             publish_time_ns: 0,
             frame_id: frame_id.into(),
+            stream_epoch: 0,
         }
     }
 

@@ -13,6 +13,7 @@
 //! | `conesight_source_restarts_total` | counter | (camera) restarts of a source that failed, ended or stalled |
 //! | `conesight_stage_latency_seconds` | histogram | `stage` |
 //! | `conesight_queue_depth` | gauge | |
+//! | `conesight_start_time_seconds` | gauge | when the process started (a restarted service shows a new value) |
 //! | `conesight_detections_masked_total` | counter | (detector) detections dropped in the ego mask |
 //! | `conesight_detector_coverage_ratio` | gauge | (detector) share of the frame it covers |
 //! | `conesight_cones_published_total` | counter | `class` (localiser) |
@@ -249,6 +250,19 @@ impl Metrics {
             "queue_depth",
             "Inputs waiting for the worker",
             queue_depth.clone(),
+        );
+        // When this process started: a restarted service shows a new value (and its counters
+        // start again from 0), so `changes(conesight_start_time_seconds[5m])` counts restarts.
+        let start_time = Gauge::<f64, AtomicU64>::default();
+        start_time.set(
+            std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0.0, |d| d.as_secs_f64()),
+        );
+        registry.register(
+            "start_time_seconds",
+            "When this service process started, seconds since the Unix epoch (a restart shows a new value)",
+            start_time,
         );
         Self {
             registry,

@@ -37,6 +37,8 @@ pub async fn run(
     } else {
         None
     };
+    // This run of the camera: consumers count a change as a restart (`Header::stream_epoch`).
+    let stream_epoch = now_ns();
     let pacing = source.pacing();
     let paced_by_cones = pacing == Pacing::Publisher && args.rate_hz <= 0.0;
     let pace = if paced_by_cones {
@@ -143,6 +145,7 @@ pub async fn run(
         health.frame_arrived();
         if last_info.is_none_or(|at| at.elapsed() >= CAMERA_INFO_PERIOD) {
             let mut header = pb::Header::new(camera_id, sequence, now_ns(), frame_id.clone());
+            header.stream_epoch = stream_epoch;
             header.stamp_publish();
             let info =
                 pb::CameraInfo::new(header, &item.frame.camera, Some(&item.frame.extrinsics));
@@ -151,7 +154,8 @@ pub async fn run(
         }
         let started = Instant::now();
         let acquisition_ns = item.acquisition_ns.unwrap_or_else(now_ns);
-        let header = pb::Header::new(camera_id, sequence, acquisition_ns, frame_id.clone());
+        let mut header = pb::Header::new(camera_id, sequence, acquisition_ns, frame_id.clone());
+        header.stream_epoch = stream_epoch;
         let encoding = args.common.zenoh.frame_encoding;
         let quality = args.common.zenoh.jpeg_quality;
         let (payload, storage) = tokio::task::block_in_place(|| {

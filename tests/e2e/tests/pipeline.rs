@@ -174,6 +174,7 @@ async fn frames_in_cones_out_within_model_accuracy_then_restart_each_service() {
             .filter(|n| *n != name)
             .filter_map(|n| cluster.pid(n).map(|pid| (n, pid)))
             .collect();
+        let started_before = cluster.metric(name, "conesight_start_time_seconds");
         cluster.kill(name).unwrap();
         tokio::time::sleep(Duration::from_millis(500)).await;
         let restarted = Instant::now();
@@ -195,6 +196,12 @@ async fn frames_in_cones_out_within_model_accuracy_then_restart_each_service() {
             took.as_secs_f64()
         );
         assert!(resumed, "{name}: no cones within 10 s of the restart");
+        // The restarted service says it started anew (its counters start from 0 again).
+        let started_after = cluster.metric(name, "conesight_start_time_seconds");
+        assert!(
+            started_before > 0.0 && started_after > started_before,
+            "{name}: start time {started_before} -> {started_after}"
+        );
         // Generous: a restart takes 0.2-1 s on a quiet machine, but a model load and the
         // first inference on a busy 2-core CI machine took 2.15 s once; the figure is printed.
         assert!(

@@ -78,6 +78,17 @@ async fn a_default_camera_killed_and_restarted_gives_cones_again_at_once() {
         restarts >= 1.0,
         "{consumer} did not count the camera's restart"
     );
+    // The camera's run (`stream_epoch`) travels in every header: the localiser, two hops on,
+    // counts the restart too.
+    let downstream = cluster.metric(
+        "localiser",
+        "conesight_stream_restarts_total{stream=\"keypoints\"}",
+    );
+    println!("localiser: keypoints stream restarts {downstream}");
+    assert!(
+        downstream >= 1.0,
+        "the localiser did not count the camera's restart"
+    );
     assert!(cluster.is_running("camera"), "the restarted camera exited");
 }
 
