@@ -193,6 +193,16 @@ fn predict_refuses_a_truncated_jpeg_by_name_and_processes_the_others() {
     let half = dir.0.join("half.jpg");
     std::fs::write(&whole, &jpeg).unwrap();
     std::fs::write(&half, &jpeg[..jpeg.len() / 2]).unwrap();
+    // More bad files (issue 40's probes): empty, a PNG with a broken CRC, text named .jpg.
+    let empty = dir.0.join("empty.jpg");
+    std::fs::write(&empty, b"").unwrap();
+    let mut png = std::fs::read(dir.0.join("images/000000.png")).unwrap();
+    let idat = png.windows(4).position(|w| w == b"IDAT").unwrap();
+    png[idat + 40] ^= 0x55;
+    let broken_png = dir.0.join("broken-crc.png");
+    std::fs::write(&broken_png, &png).unwrap();
+    let text = dir.0.join("text.jpg");
+    std::fs::write(&text, b"not an image at all, just text").unwrap();
     let camera = dir.0.join("camera_info/000000.yaml");
     let output = conesight(&[
         "predict",
@@ -200,6 +210,9 @@ fn predict_refuses_a_truncated_jpeg_by_name_and_processes_the_others() {
         camera.to_str().unwrap(),
         half.to_str().unwrap(),
         whole.to_str().unwrap(),
+        empty.to_str().unwrap(),
+        broken_png.to_str().unwrap(),
+        text.to_str().unwrap(),
     ]);
     assert_eq!(
         output.status.code(),
@@ -207,7 +220,18 @@ fn predict_refuses_a_truncated_jpeg_by_name_and_processes_the_others() {
         "a truncated image fails the run"
     );
     let lines = json_lines(&output);
-    assert_eq!(lines.len(), 2);
+    assert_eq!(lines.len(), 5);
+    for (line, name, what) in [
+        (&lines[2], "empty.jpg", "truncated"),
+        (&lines[3], "broken-crc.png", "corrupt"),
+        (&lines[4], "text.jpg", "not supported"),
+    ] {
+        let error = line["error"].as_str().unwrap_or_default();
+        assert!(
+            error.contains(name) && error.contains(what),
+            "{name}: {error}"
+        );
+    }
     let error = lines[0]["error"].as_str().unwrap();
     assert!(
         error.contains("half.jpg") && error.contains("truncated"),
