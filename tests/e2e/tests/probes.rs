@@ -139,7 +139,7 @@ async fn twenty_six_more_bad_inputs_are_refused_counted_and_never_published() {
         change(&mut i);
         Put::Info(i)
     };
-    let first_box = |d: &mut pb::Detections| d.detections[0].r#box.clone().unwrap();
+    let first_box = |d: &mut pb::Detections| d.detections[0].r#box.unwrap();
     let mut corrupt_scan = jpeg.data.to_vec();
     let middle = corrupt_scan.len() / 2;
     corrupt_scan[middle..middle + 64].fill(0);
@@ -249,7 +249,7 @@ async fn twenty_six_more_bad_inputs_are_refused_counted_and_never_published() {
             kinds: &["wrong_count"],
             sequence: Some(121),
             put: keypoints(121, &|k| {
-                let extra = k.cones[0].keypoints[0].clone();
+                let extra = k.cones[0].keypoints[0];
                 k.cones[0].keypoints.push(extra);
             }),
         },
