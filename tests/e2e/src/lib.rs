@@ -578,6 +578,14 @@ impl StreamLog {
         })
     }
 
+    /// The sequence of every message received so far, in arrival order.
+    pub fn sequences(&self) -> Vec<u64> {
+        self.stamps
+            .lock()
+            .map(|s| s.iter().map(|t| t.sequence).collect())
+            .unwrap_or_default()
+    }
+
     /// Stamps received between `from_ns` and `to_ns`, keyed by (sequence, acquisition).
     pub fn between(&self, from_ns: u64, to_ns: u64) -> BTreeMap<(u64, u64), Stamp> {
         self.stamps
@@ -643,4 +651,21 @@ impl Inputs {
         tokio::time::sleep(Duration::from_secs(2)).await;
         Ok(inputs)
     }
+}
+
+/// Seven keypoints spread over a cone's box (apex, stripe edges, bases), enough for a pose: for
+/// tests that play the keypoints service by hand.
+pub fn keypoints_in(b: &conesight_vision::PixelBox) -> [nalgebra::Point2<f64>; 7] {
+    let (w, h) = (b.x_max_px - b.x_min_px, b.y_max_px - b.y_min_px);
+    let cx = 0.5 * (b.x_min_px + b.x_max_px);
+    let at = |dx: f64, fy: f64| nalgebra::Point2::new(cx + dx * w, b.y_min_px + fy * h);
+    [
+        at(0.0, 0.0),
+        at(-0.2, 0.35),
+        at(-0.33, 0.65),
+        at(-0.5, 1.0),
+        at(0.2, 0.35),
+        at(0.33, 0.65),
+        at(0.5, 1.0),
+    ]
 }

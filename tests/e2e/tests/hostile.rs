@@ -14,7 +14,6 @@ use conesight_bus::zenoh::Wait;
 use conesight_bus::{Stream, Topics, encode};
 use conesight_e2e::{Cluster, Fixture, Inputs, StreamLog};
 use conesight_proto::{ConeDetection, ConeKeypoints, now_ns, pb};
-use conesight_vision::PixelBox;
 
 const EXE: &str = env!("CARGO_BIN_EXE_conesight-e2e-services");
 
@@ -24,14 +23,6 @@ fn header(sequence: u64) -> pb::Header {
 
 fn pause() -> tokio::time::Sleep {
     tokio::time::sleep(Duration::from_millis(250))
-}
-
-/// Sequences seen on a stream log.
-fn sequences(log: &StreamLog) -> Vec<u64> {
-    log.stamps
-        .lock()
-        .map(|s| s.iter().map(|t| t.sequence).collect())
-        .unwrap_or_default()
 }
 
 /// Where a JPEG's entropy-coded data starts: just after its start-of-scan segment.
@@ -121,8 +112,8 @@ async fn truncated_frames_are_refused_by_every_service() {
     assert_eq!(at_detector, 3.0, "detector: truncated frames counted");
     let cones: Vec<u64> = observer.snapshot().iter().map(|m| m.sequence).collect();
     for (name, published) in [
-        ("detections", sequences(&detections_out)),
-        ("keypoints", sequences(&keypoints_out)),
+        ("detections", detections_out.sequences()),
+        ("keypoints", keypoints_out.sequences()),
         ("cones", cones),
     ] {
         for (sequence, keep) in cuts {
@@ -165,7 +156,9 @@ async fn impossible_numbers_are_refused_whole_and_do_not_poison_the_counters() {
         .iter()
         .map(|detection| ConeKeypoints {
             detection: *detection,
-            observation: conesight_core::ConeObservation::new(keypoints_in(&detection.box_px)),
+            observation: conesight_core::ConeObservation::new(conesight_e2e::keypoints_in(
+                &detection.box_px,
+            )),
         })
         .collect();
     assert!(cones.len() >= 2, "the fixture frame has cones");
@@ -345,7 +338,7 @@ async fn impossible_numbers_are_refused_whole_and_do_not_poison_the_counters() {
             "cones were published from {what} (sequence {sequence})"
         );
     }
-    let from_keypoints = sequences(&keypoints_out);
+    let from_keypoints = keypoints_out.sequences();
     for (sequence, what) in [
         (live + 3, "a detection 1e-9 px wide"),
         (live + 4, "1,024 detections"),
@@ -362,20 +355,4 @@ async fn impossible_numbers_are_refused_whole_and_do_not_poison_the_counters() {
     assert_eq!(lost_keypoints, 2.0, "localiser: keypoints frames lost");
     assert_eq!(lost_frames, 2.0, "keypoints service: frames lost");
     assert_eq!(lost_detections, 2.0, "keypoints service: detections lost");
-}
-
-/// Seven keypoints spread over a cone's box (apex, stripe edges, bases), enough for a pose.
-fn keypoints_in(b: &PixelBox) -> [nalgebra::Point2<f64>; 7] {
-    let (w, h) = (b.x_max_px - b.x_min_px, b.y_max_px - b.y_min_px);
-    let cx = 0.5 * (b.x_min_px + b.x_max_px);
-    let at = |dx: f64, fy: f64| nalgebra::Point2::new(cx + dx * w, b.y_min_px + fy * h);
-    [
-        at(0.0, 0.0),
-        at(-0.2, 0.35),
-        at(-0.33, 0.65),
-        at(-0.5, 1.0),
-        at(0.2, 0.35),
-        at(0.33, 0.65),
-        at(0.5, 1.0),
-    ]
 }

@@ -15,7 +15,6 @@ use conesight_bus::zenoh::bytes::ZBytes;
 use conesight_bus::{Stream, Topics, encode};
 use conesight_e2e::{Cluster, Fixture, Inputs, StreamLog};
 use conesight_proto::{ConeKeypoints, now_ns, pb};
-use conesight_vision::PixelBox;
 
 const EXE: &str = env!("CARGO_BIN_EXE_conesight-e2e-services");
 
@@ -44,13 +43,6 @@ struct Probe {
     put: Put,
 }
 
-fn sequences(log: &StreamLog) -> Vec<u64> {
-    log.stamps
-        .lock()
-        .map(|s| s.iter().map(|t| t.sequence).collect())
-        .unwrap_or_default()
-}
-
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn twenty_six_more_bad_inputs_are_refused_counted_and_never_published() {
     let _one = conesight_e2e::one_cluster_at_a_time().await;
@@ -72,7 +64,9 @@ async fn twenty_six_more_bad_inputs_are_refused_counted_and_never_published() {
         .iter()
         .map(|detection| ConeKeypoints {
             detection: *detection,
-            observation: conesight_core::ConeObservation::new(keypoints_in(&detection.box_px)),
+            observation: conesight_core::ConeObservation::new(conesight_e2e::keypoints_in(
+                &detection.box_px,
+            )),
         })
         .collect();
     let good_info = || pb::CameraInfo::new(header(0), &good.camera, Some(&good.extrinsics));
@@ -437,7 +431,7 @@ async fn twenty_six_more_bad_inputs_are_refused_counted_and_never_published() {
     }
     assert!(failures.is_empty(), "probes not refused: {failures:#?}");
     let cones_out: Vec<u64> = observer.snapshot().iter().map(|m| m.sequence).collect();
-    let keypoints_published = sequences(&keypoints_out);
+    let keypoints_published = keypoints_out.sequences();
     for probe in &probes {
         let Some(sequence) = probe.sequence else {
             continue;
@@ -465,20 +459,4 @@ async fn twenty_six_more_bad_inputs_are_refused_counted_and_never_published() {
             "ranges moved: {after:?} vs {reference:?}"
         );
     }
-}
-
-/// Seven keypoints spread over a cone's box (apex, stripe edges, bases), enough for a pose.
-fn keypoints_in(b: &PixelBox) -> [nalgebra::Point2<f64>; 7] {
-    let (w, h) = (b.x_max_px - b.x_min_px, b.y_max_px - b.y_min_px);
-    let cx = 0.5 * (b.x_min_px + b.x_max_px);
-    let at = |dx: f64, fy: f64| nalgebra::Point2::new(cx + dx * w, b.y_min_px + fy * h);
-    [
-        at(0.0, 0.0),
-        at(-0.2, 0.35),
-        at(-0.33, 0.65),
-        at(-0.5, 1.0),
-        at(0.2, 0.35),
-        at(0.33, 0.65),
-        at(0.5, 1.0),
-    ]
 }

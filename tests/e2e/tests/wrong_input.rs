@@ -45,7 +45,9 @@ async fn wrong_inputs_are_counted_and_never_published() {
         .into_iter()
         .map(|detection| conesight_proto::ConeKeypoints {
             detection,
-            observation: conesight_core::ConeObservation::new(keypoints_in(&detection.box_px)),
+            observation: conesight_core::ConeObservation::new(conesight_e2e::keypoints_in(
+                &detection.box_px,
+            )),
         })
         .collect();
     assert!(!cones.is_empty());
@@ -183,20 +185,4 @@ async fn wrong_inputs_are_counted_and_never_published() {
     // Only validated inputs move the sequence (issue 40): 15 (wrong size, a good header) is
     // refused, so 100 starts the count and 100 -> 105 loses 4.
     assert_eq!(lost, 4.0, "frames lost");
-}
-
-/// Seven keypoints spread over a cone's box (apex, stripe edges, bases), enough for a pose.
-fn keypoints_in(b: &conesight_vision::PixelBox) -> [nalgebra::Point2<f64>; 7] {
-    let (w, h) = (b.x_max_px - b.x_min_px, b.y_max_px - b.y_min_px);
-    let cx = 0.5 * (b.x_min_px + b.x_max_px);
-    let at = |dx: f64, fy: f64| nalgebra::Point2::new(cx + dx * w, b.y_min_px + fy * h);
-    [
-        at(0.0, 0.0),
-        at(-0.2, 0.35),
-        at(-0.33, 0.65),
-        at(-0.5, 1.0),
-        at(0.2, 0.35),
-        at(0.33, 0.65),
-        at(0.5, 1.0),
-    ]
 }
