@@ -5,7 +5,8 @@
 //! frame annotated with the cones' boxes, the rates and end-to-end latency, and every service
 //! found through its liveliness token with its `health` answer.
 //!
-//! Routes: `/` (the page), `/api/state` (JSON: cones, rates, latency, services), `/api/frame.jpg`
+//! Routes: `/` (the page), `/api/state` (JSON: cones, rates, latency, frames without cones and
+//! restarts of the cone stream, services), `/api/frame.jpg`
 //! (the frame of the latest cones annotated as every conesight frame is, `draw::annotate`:
 //! boxes in cone colour with class, score and range, keypoints, a cross where the range
 //! failed; JPEG, 960 px wide at most). The page polls `/api/state` four times a second.
@@ -31,6 +32,7 @@ use conesight_bus::zenoh::bytes::ZBytes;
 use conesight_bus::{Stream, Topics, ZenohArgs, declare_subscriber, decode};
 use conesight_core::mount::MountCheck;
 use conesight_pipeline::Shutdown;
+use conesight_pipeline::gate::{InputGate, SequenceStep};
 use conesight_proto::{ConeKeypoints, LocatedCone, pb};
 use image::RgbImage;
 use serde::Serialize;
@@ -103,6 +105,13 @@ struct Snapshot {
     frames_hz: f64,
     latency_ms: Option<f64>,
     cones_messages: u64,
+    /// Frames of the shown cameras whose cones never came: gaps in the cones' frame sequence
+    /// (a localiser restarted, a stage that dropped frames), counted as every service counts
+    /// its inputs' (`conesight_pipeline::InputGate::sequence_step`).
+    cones_lost: u64,
+    /// New streams of cones: a camera restarted (its `stream_epoch` changed), its sequence
+    /// went back or jumped by more than `MAX_SEQUENCE_JUMP`.
+    cone_stream_restarts: u64,
     errors: u64,
     last_error: Option<String>,
     services: Vec<ServiceStatus>,
@@ -125,6 +134,8 @@ struct Inner {
     jpeg: Option<(u64, Vec<u8>)>,
     /// The mount check of each camera.
     mount_checks: std::collections::BTreeMap<String, MountCheck>,
+    /// The cones' sequence of each camera (gaps and restarts; no other check of the gate).
+    sequences: std::collections::BTreeMap<String, InputGate>,
 }
 
 type Shared = Arc<Mutex<Inner>>;
@@ -292,6 +303,16 @@ fn on_cones(shared: &Shared, sample: &conesight_bus::zenoh::sample::Sample) {
     let now = Instant::now();
     let mut inner = lock(shared);
     inner.cone_times.push_back(now);
+    let step = inner
+        .sequences
+        .entry(header.camera_id.clone())
+        .or_insert_with(|| InputGate::new(&header.camera_id, None))
+        .sequence_step("cones", header.frame_sequence, header.stream_epoch);
+    match step {
+        SequenceStep::Next { lost } => inner.snapshot.cones_lost += lost,
+        SequenceStep::Restart { .. } => inner.snapshot.cone_stream_restarts += 1,
+        SequenceStep::First | SequenceStep::Repeat => {}
+    }
     let check = inner
         .mount_checks
         .entry(header.camera_id.clone())

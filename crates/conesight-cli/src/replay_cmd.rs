@@ -181,6 +181,12 @@ async fn run_async(args: ReplayArgs) -> anyhow::Result<()> {
             summary.cones_received,
             summary.frames_lost,
         );
+        if summary.frames_refused > 0 {
+            println!(
+                "refused {} recorded frames whose image does not decode completely (not published; the log names each)",
+                summary.frames_refused
+            );
+        }
         if !recorded.is_empty() {
             println!(
                 "recorded: {}",

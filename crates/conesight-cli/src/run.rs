@@ -14,7 +14,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use conesight_bus::{Topics, ZenohArgs, open_session};
-use conesight_camera_service::{CameraArgs, CameraFrame, load_source};
+use conesight_camera_service::{CameraArgs, load_source};
 use conesight_detector_service::DetectorArgs;
 use conesight_keypoints_service::KeypointsArgs;
 use conesight_localiser_service::LocaliserArgs;
@@ -257,8 +257,9 @@ async fn run_async(args: RunArgs) -> anyhow::Result<()> {
     } else {
         None
     };
-    let preloaded: Option<Arc<Vec<CameraFrame>>> =
-        source.as_ref().and_then(|source| source.known_frames());
+    // The truth of each frame, looked up as its cones come (not waited for up front: a
+    // synthetic camera renders the rest of its frames in the background while it publishes).
+    let truth = source.as_ref().and_then(|source| source.frame_lookup());
     // Zenoh's receive limit follows the services' message limit.
     let session =
         open_session(&CommonArgs::for_camera(args.zenoh.clone(), &args.camera).zenoh_with_limits())
@@ -369,7 +370,7 @@ async fn run_async(args: RunArgs) -> anyhow::Result<()> {
         has_camera: has(ServiceName::Camera),
         save_every: args.save_every,
         out: args.out.clone(),
-        truth: preloaded.as_deref().map(Vec::as_slice),
+        truth,
     };
     let summary = monitor.run(&watch, &camera, &shutdown).await;
     shutdown.trigger();

@@ -50,7 +50,7 @@ impl CameraState {
 }
 
 /// What the monitor is asked to watch for.
-pub struct Watch<'a> {
+pub struct Watch {
     /// Stop once the cones of this many frames are in (0: until the camera is done or Ctrl-C).
     pub frames: u64,
     /// The camera runs in this process (its sequence numbers start at 0).
@@ -60,14 +60,14 @@ pub struct Watch<'a> {
     /// Where the saved frames go.
     pub out: PathBuf,
     /// The renderer's frames with their truth, when the source is a preloaded synthetic one.
-    pub truth: Option<&'a [CameraFrame]>,
+    pub truth: Option<conesight_sources::FrameLookup>,
 }
 
-impl Watch<'_> {
-    /// The rendered frame published as `sequence`, with its truth.
-    fn truth_of(&self, sequence: u64) -> Option<&CameraFrame> {
-        let frames = self.truth?;
-        frames.get((sequence % frames.len().max(1) as u64) as usize)
+impl Watch {
+    /// The rendered frame published as `sequence`, with its truth (only of this process's
+    /// camera: another camera's sequence numbers name other frames).
+    fn truth_of(&self, sequence: u64) -> Option<CameraFrame> {
+        self.truth.as_ref().and_then(|lookup| lookup(sequence))
     }
 }
 
@@ -184,12 +184,7 @@ impl Monitor {
 
     /// Watches until the frames asked for are in, the camera failed, or it is done and the
     /// pipeline has drained, or `shutdown`.
-    pub async fn run(
-        self,
-        watch: &Watch<'_>,
-        camera: &CameraState,
-        shutdown: &Shutdown,
-    ) -> Summary {
+    pub async fn run(self, watch: &Watch, camera: &CameraState, shutdown: &Shutdown) -> Summary {
         let with_truth = watch.truth.is_some();
         let mut summary = Summary {
             with_truth,
@@ -242,7 +237,7 @@ impl Monitor {
                     for cone in &cones {
                         mount_check.add(cone.estimate.range_m(), cone.position_in_vehicle.z);
                     }
-                    summary.outcomes.insert(sequence, outcome(&cones, watch.truth_of(sequence), latency_ms));
+                    summary.outcomes.insert(sequence, outcome(&cones, watch.truth_of(sequence).as_ref(), latency_ms));
                     window.push(sequence);
                     last_output = Instant::now();
                     let Some(writer) = writer.as_mut() else { continue };
@@ -259,7 +254,7 @@ impl Monitor {
                         payload: payload.clone(),
                         keypoints: keypoints_kept.get(&sequence).cloned().unwrap_or_default(),
                         cones,
-                        truth: watch.truth_of(sequence).cloned(),
+                        truth: watch.truth_of(sequence),
                         field_of_view,
                     });
                     next_save = sequence + watch.save_every;

@@ -124,6 +124,11 @@ impl Drop for Process {
     }
 }
 
+/// How many distinct frames [`start_looped_run`]'s drive loops over: frames `n` and
+/// `n + LOOP_FRAMES` are the same image, so they give the same cones.
+pub const LOOP_FRAMES: u64 = 10;
+const LOOP_FRAMES_STR: &str = "10";
+
 /// `conesight run` of the whole pipeline on a looped 10-frame synthetic drive at 5 Hz until
 /// killed, in a namespace of its own, with `extra` flags (e.g. `--dashboard-addr ADDR`); its out
 /// folder and logs in `dir`. Returns the process, its Zenoh endpoint and its namespace.
@@ -139,7 +144,7 @@ pub fn start_looped_run(dir: &TempDir, name: &str, extra: &[&str]) -> (Process, 
         "--rate-hz",
         "5",
         "--preload",
-        "10",
+        LOOP_FRAMES_STR,
         "--namespace",
         &namespace,
         "--zenoh-listen",

@@ -258,18 +258,33 @@ async fn dashboard_in_chromium_shows_cones_that_move() {
         .await,
     );
     tokio::time::sleep(Duration::from_secs(1)).await;
-    id += 1;
-    let second = read(eval(&mut socket, id, state).await);
-    id += 1;
-    let png2 = shot(
-        call(
-            &mut socket,
-            id,
-            "Page.captureScreenshot",
-            json!({ "format": "png" }),
-        )
-        .await,
-    );
+    // The drive loops over LOOP_FRAMES frames: a frame a whole number of loops later is the same
+    // image with the same cones, so read again until the page shows a different frame of the loop
+    // (at 5 Hz, 200 ms more; CI was once slow enough to land exactly 10 frames on).
+    let sequence = |dom: &Value| dom["sequence"].as_str().and_then(|s| s.parse::<u64>().ok());
+    let waited = Instant::now();
+    let (second, png2) = loop {
+        id += 1;
+        let second = read(eval(&mut socket, id, state).await);
+        id += 1;
+        let png2 = shot(
+            call(
+                &mut socket,
+                id,
+                "Page.captureScreenshot",
+                json!({ "format": "png" }),
+            )
+            .await,
+        );
+        let same_image = match (sequence(&first), sequence(&second)) {
+            (Some(a), Some(b)) => b.abs_diff(a) % common_process::LOOP_FRAMES == 0,
+            _ => false,
+        };
+        if !same_image || waited.elapsed() > Duration::from_secs(10) {
+            break (second, png2);
+        }
+        tokio::time::sleep(Duration::from_millis(150)).await;
+    };
     let _ = browser.kill();
     let _ = browser.wait();
 
@@ -656,4 +671,119 @@ async fn the_dashboard_shows_a_banner_when_the_cones_float() {
         .count();
     assert!(amber > 1000, "{amber} banner pixels");
     session.close().await.unwrap();
+}
+
+/// Issue 40, the cones message type at its consumer: `conesight dashboard` fed on the bus
+/// (no browser needed) with whole cones, then bytes that are no protobuf, a cone whose
+/// position is NaN, cones 7 frames later, and cones of a new camera run (another
+/// `stream_epoch`, sequence 0). The two bad messages are counted as errors and never shown
+/// (the last good cones stay); the 6 frames whose cones never came are counted lost and the
+/// new run as a stream restart, not as lost frames.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_dashboard_refuses_bad_cones_and_counts_lost_frames_and_restarts() {
+    use conesight_bus::{Stream, Topics, ZenohArgs, encode, open_session};
+    use conesight_proto::pb;
+    let dir = TempDir::new("dashboard-bad");
+    let namespace = format!("bad{}", std::process::id());
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let port = free_port();
+    let addr = format!("127.0.0.1:{port}");
+    let _dashboard = common_process::Process::start(
+        "dashboard",
+        &[
+            "dashboard",
+            "--namespace",
+            &namespace,
+            "--zenoh-listen",
+            &endpoint,
+            "--dashboard-addr",
+            &addr,
+        ],
+        &dir.join("dashboard.log"),
+    );
+    let args = ZenohArgs {
+        connect: vec![endpoint],
+        listen: vec!["tcp/127.0.0.1:0".to_owned()],
+        namespace,
+        ..ZenohArgs::default()
+    };
+    let session = open_session(&args).await.unwrap();
+    let topics = Topics::from_args(&args).unwrap();
+    let key = topics.key("front", Stream::Cones).unwrap();
+    let cones = [
+        cone_at(conesight_core::ConeClass::Blue, 8.0, 2.0),
+        cone_at(conesight_core::ConeClass::Yellow, 12.0, -2.0),
+    ];
+    let message = |sequence: u64, epoch: u64| {
+        let mut header = pb::Header::new(
+            "front",
+            sequence,
+            conesight_proto::now_ns(),
+            "front_optical",
+        );
+        header.stream_epoch = epoch;
+        pb::Cones::new_stamped(header, &cones)
+    };
+    let state = || {
+        http_get(port, "/api/state")
+            .and_then(|body| serde_json::from_str::<Value>(&body).ok())
+            .unwrap_or(Value::Null)
+    };
+    // Whole cones until the dashboard shows them (it may join after the first puts).
+    let started = Instant::now();
+    let mut sequence = 0;
+    while state()["cones"].as_array().map_or(0, Vec::len) < 2 {
+        assert!(
+            started.elapsed() < Duration::from_secs(60),
+            "no cones shown"
+        );
+        session
+            .put(key.clone(), encode(&message(sequence, 1)))
+            .await
+            .unwrap();
+        sequence += 1;
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    }
+    let before = state();
+    let last = sequence - 1;
+    let mut nan = message(sequence, 1);
+    nan.cones[1].position_in_vehicle_m.as_mut().unwrap().x = f64::NAN;
+    session
+        .put(key.clone(), b"\x08\xff\xff not protobuf".to_vec())
+        .await
+        .unwrap();
+    session.put(key.clone(), encode(&nan)).await.unwrap();
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    let refused = state();
+    // 7 frames after the last whole one: 6 never came (the NaN one arrived but was refused;
+    // the dashboard counts what it shows, so it is among the 6).
+    session
+        .put(key.clone(), encode(&message(last + 7, 1)))
+        .await
+        .unwrap();
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    session
+        .put(key.clone(), encode(&message(0, 2)))
+        .await
+        .unwrap();
+    let deadline = Instant::now() + Duration::from_secs(10);
+    let after = loop {
+        let after = state();
+        if after["cone_stream_restarts"].as_u64().unwrap_or(0) >= 1 || Instant::now() > deadline {
+            break after;
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    };
+    eprintln!("before {before}\nrefused {refused}\nafter {after}");
+    let count = |v: &Value, field: &str| v[field].as_u64().unwrap_or(u64::MAX);
+    assert_eq!(count(&refused, "errors"), count(&before, "errors") + 2);
+    assert_eq!(refused["cones"], before["cones"], "a bad message was shown");
+    assert_eq!(count(&refused, "sequence"), last);
+    assert_eq!(
+        count(&after, "cones_lost"),
+        count(&before, "cones_lost") + 6
+    );
+    assert_eq!(count(&after, "cone_stream_restarts"), 1);
+    assert_eq!(count(&after, "sequence"), 0);
+    let _ = session.close().await;
 }

@@ -7,119 +7,18 @@
 //! with the model's sha256, cones by class and the input age.
 #![allow(clippy::unwrap_used, clippy::expect_used, missing_docs)]
 
+mod common_pipeline;
 mod common_process;
 
 use std::collections::BTreeSet;
 use std::process::Command;
 use std::time::{Duration, Instant};
 
+use common_pipeline::{Pipeline, SERVICES};
 use common_process::{BIN, Process, TempDir, free_port, http_get, metric};
-use conesight_bus::{ServiceQuery, Stream, Topics, ZenohArgs, open_session};
+use conesight_bus::{ServiceQuery, Stream, Topics, open_session};
 use conesight_proto::{Message, pb};
 use serde_json::Value;
-
-const SERVICES: [&str; 4] = ["camera", "detector", "keypoints", "localiser"];
-
-struct Pipeline {
-    namespace: String,
-    endpoints: Vec<String>,
-    http_base: u16,
-    processes: Vec<Option<Process>>,
-}
-
-impl Pipeline {
-    /// The four services, each its own process listening on its own port and connecting to
-    /// the others (and to `observer`).
-    fn start(dir: &TempDir) -> Self {
-        let namespace = format!("presence{}", std::process::id());
-        let endpoints: Vec<String> = (0..5)
-            .map(|_| format!("tcp/127.0.0.1:{}", free_port()))
-            .collect();
-        let http_base = free_port().saturating_sub(10).max(20_000);
-        let base = http_base.to_string();
-        let mut processes = Vec::new();
-        for (index, service) in SERVICES.iter().enumerate() {
-            let others: Vec<&str> = endpoints
-                .iter()
-                .enumerate()
-                .filter(|(i, _)| *i != index)
-                .map(|(_, e)| e.as_str())
-                .collect();
-            let others = others.join(",");
-            let out = dir.join(service);
-            let mut args = vec![
-                "run",
-                "--services",
-                service,
-                "--namespace",
-                &namespace,
-                "--zenoh-listen",
-                &endpoints[index],
-                "--zenoh-connect",
-                &others,
-                "--frames",
-                "0",
-                "--http-base-port",
-                &base,
-                "--out",
-                out.to_str().unwrap(),
-            ];
-            if *service == "camera" {
-                args.extend(["--rate-hz", "5", "--preload", "5"]);
-            }
-            processes.push(Some(Process::start(
-                service,
-                &args,
-                &dir.join(&format!("{service}.log")),
-            )));
-        }
-        Self {
-            namespace,
-            endpoints,
-            http_base,
-            processes,
-        }
-    }
-
-    /// The HTTP port of `service` (`--http-base-port` + its index).
-    fn http_port(&self, service: &str) -> u16 {
-        let index = SERVICES.iter().position(|s| *s == service).unwrap();
-        self.http_base + u16::try_from(index).unwrap()
-    }
-
-    /// Zenoh args of a consumer joining the pipeline (the fifth endpoint is its own).
-    fn consumer_args(&self, listen: bool) -> ZenohArgs {
-        ZenohArgs {
-            connect: self.endpoints[..4].to_vec(),
-            listen: if listen {
-                vec![self.endpoints[4].clone()]
-            } else {
-                Vec::new()
-            },
-            namespace: self.namespace.clone(),
-            ..ZenohArgs::default()
-        }
-    }
-
-    /// `--namespace` and `--zenoh-connect` of a `conesight` consumer command.
-    fn cli_args(&self) -> Vec<String> {
-        vec![
-            "--namespace".into(),
-            self.namespace.clone(),
-            "--zenoh-connect".into(),
-            self.endpoints[..4].join(","),
-        ]
-    }
-
-    fn log(&self) -> String {
-        self.processes
-            .iter()
-            .flatten()
-            .map(|p| format!("=== {} ===\n{}", p.name, p.log_text()))
-            .collect::<Vec<_>>()
-            .join("\n")
-    }
-}
 
 fn status_json(pipeline: &Pipeline) -> Vec<Value> {
     let output = Command::new(BIN)
@@ -235,7 +134,7 @@ fn scrape_with_prometheus(pipeline: &Pipeline, dir: &TempDir) {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn services_answer_queries_and_status_follows_them() {
     let dir = TempDir::new("presence");
-    let mut pipeline = Pipeline::start(&dir);
+    let mut pipeline = Pipeline::start(&dir, "presence", &["--rate-hz", "5", "--preload", "5"]);
 
     // Every service holds a token, answers health, and cones flow (the localiser has
     // processed frames).

@@ -89,6 +89,8 @@ pub struct ReplayProgress {
     pub cones_received: AtomicU64,
     /// Frames whose cones never came (as fast as possible: within the timeout).
     pub frames_lost: AtomicU64,
+    /// Recorded frames not published: their image does not decode completely.
+    pub frames_refused: AtomicU64,
     /// Bytes of the files read.
     pub bytes_read: AtomicU64,
     /// Sum of the files' sizes.
@@ -106,6 +108,10 @@ pub struct ReplaySummary {
     pub cones_received: u64,
     /// Frames whose cones never came.
     pub frames_lost: u64,
+    /// Recorded frames not published because their image does not decode completely (a JPEG
+    /// cut short or with stray bytes): logged with the file, the
+    /// message's index and why; the replay goes on with the next frame.
+    pub frames_refused: u64,
     /// Recorded messages of other streams, not published.
     pub skipped_messages: u64,
     /// Wall time from the first frame to the end, seconds.
@@ -350,6 +356,18 @@ impl Player {
                             .map_err(|error| error.to_string())
                     })
                     .map_err(|reason| undecodable(path, &message, reason))?;
+                if let Err(error) = check_image(&frame) {
+                    self.summary.frames_refused += 1;
+                    progress.frames_refused.fetch_add(1, Ordering::Relaxed);
+                    if self.summary.frames_refused.is_power_of_two() {
+                        tracing::warn!(
+                            refused = self.summary.frames_refused,
+                            "{}: not published (the services would refuse it): {error}",
+                            undecodable(path, &message, error.to_string())
+                        );
+                    }
+                    return Ok(());
+                }
                 let header = restamp(header, stamp_ns);
                 let id = frame_id(&header);
                 let camera = header.camera_id.clone();
@@ -434,6 +452,16 @@ fn restamp(mut header: pb::Header, stamp_ns: u64) -> pb::Header {
     header.acquisition_time_ns = stamp_ns;
     header.publish_time_ns = now_ns().max(stamp_ns);
     header
+}
+
+/// The frame's image is whole: a JPEG's segments run from SOI to EOI with nothing but markers
+/// where they belong (`conesight_vision::decode::jpeg_end`, the walk the services' decoder
+/// starts with; no pixels are decoded here). Raw frames were sized by `validate`.
+fn check_image(frame: &pb::ImageFrame) -> Result<(), conesight_vision::DecodeError> {
+    match pb::ImageEncoding::try_from(frame.encoding) {
+        Ok(pb::ImageEncoding::Jpeg) => conesight_vision::decode::jpeg_end(&frame.data).map(|_| ()),
+        _ => Ok(()),
+    }
 }
 
 fn undecodable(path: &std::path::Path, message: &RecordedMessage, reason: String) -> ReplayError {

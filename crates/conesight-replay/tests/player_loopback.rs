@@ -142,3 +142,98 @@ async fn a_recording_is_replayed_into_another_namespace_at_the_given_rate() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Issue 40: a recording whose JPEG frames are cut in half, cut to their headers, or carry a
+/// stray byte in their scan: those frames are not published (the services would refuse them),
+/// they are counted in the summary, and the whole frames around them are replayed.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn broken_jpeg_frames_of_a_recording_are_not_published_and_are_counted() {
+    let dir = std::env::temp_dir().join(format!("conesight-player-jpeg-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let drive = dir.join("drive.mcap");
+    let mut sink = McapSink::create(&drive, SinkOptions::default()).unwrap();
+    let start_ns = 1_700_000_000_000_000_000_u64;
+    let image = image::RgbImage::from_fn(64, 48, |x, y| {
+        image::Rgb([(x * 4) as u8, (y * 5) as u8, ((x + y) * 3) as u8])
+    });
+    for sequence in 0..6_u64 {
+        let stamp = start_ns + sequence * STEP_NS;
+        let mut frame = pb::ImageFrame::from_rgb_jpeg(
+            pb::Header::new("front", sequence, stamp, "front_optical"),
+            &image,
+            90,
+        )
+        .unwrap();
+        let jpeg = frame.data.to_vec();
+        let scan = jpeg.windows(2).position(|w| w == [0xff, 0xda]).unwrap();
+        frame.data = match sequence {
+            1 => jpeg[..jpeg.len() / 2].to_vec().into(),
+            3 => jpeg[..scan].to_vec().into(),
+            4 => {
+                let mut stray = jpeg.clone();
+                let inside = scan + 14 + (jpeg.len() - scan - 16) / 2;
+                stray[inside] = 0xff;
+                stray[inside + 1] = 0x42;
+                stray.into()
+            }
+            _ => frame.data,
+        };
+        sink.write(
+            "conesight/recorded/ado/front/frame",
+            Stream::Frame,
+            stamp,
+            stamp,
+            &frame.encode_to_vec(),
+        )
+        .unwrap();
+    }
+    sink.finish().unwrap();
+
+    let (player_session, pipeline_session, topics) = loopback_pair("replayed-jpeg").await.unwrap();
+    let published: Arc<Mutex<Vec<u64>>> = Arc::default();
+    let sink = published.clone();
+    let _frames_sub = declare_callback_subscriber(
+        &pipeline_session,
+        topics.key("front", Stream::Frame).unwrap(),
+        move |sample| {
+            let frame = pb::ImageFrame::decode(&sample.payload().to_bytes()[..]).unwrap();
+            sink.lock()
+                .unwrap()
+                .push(frame.header.unwrap().frame_sequence);
+        },
+    )
+    .await
+    .unwrap();
+    let options = ReplayOptions {
+        pacing: Pacing::Rate(4.0),
+        wait_for_subscribers: Duration::from_secs(10),
+        settle: Duration::from_millis(200),
+        drain: Duration::ZERO,
+        ..ReplayOptions::default()
+    };
+    let mut player = Player::new(&player_session, &topics, options)
+        .await
+        .unwrap();
+    player.prepare(std::slice::from_ref(&drive)).await.unwrap();
+    let progress = Arc::new(ReplayProgress::default());
+    let summary = player
+        .play(
+            std::slice::from_ref(&drive),
+            progress.clone(),
+            Arc::new(AtomicBool::new(false)),
+        )
+        .await
+        .unwrap();
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    assert_eq!(summary.frames_refused, 3, "{summary:?}");
+    assert_eq!(
+        progress
+            .frames_refused
+            .load(std::sync::atomic::Ordering::Relaxed),
+        3
+    );
+    assert_eq!(summary.frames_published, 3);
+    assert_eq!(*published.lock().unwrap(), [0, 2, 5]);
+    std::fs::remove_dir_all(&dir).unwrap();
+}

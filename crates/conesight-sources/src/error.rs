@@ -108,6 +108,10 @@ impl SourceError {
             Self::Ended { .. } => "source_ended",
             Self::Stalled { .. } => "source_stalled",
             Self::BadFrame { .. } => "source_bad_frame",
+            // A file that does not decode completely: `image_truncated`, `image_corrupt`, ...
+            Self::Load(conesight_pipeline::PipelineError::ImageDecode { error, .. }) => {
+                error.kind()
+            }
             Self::Load(_) => "source_failed",
         }
     }

@@ -37,6 +37,8 @@ pub struct FolderFrames {
     looped: bool,
     /// Images given.
     given: u64,
+    /// Images found unreadable since [`FrameSource::take_skipped`] was last called.
+    skipped: Vec<SourceError>,
 }
 
 /// Decodes image `index` of a folder (and its labels when `labels` is set).
@@ -112,6 +114,7 @@ impl FolderFrames {
             cursor: 0,
             looped,
             given: 0,
+            skipped: Vec::new(),
         })
     }
 
@@ -187,6 +190,7 @@ impl FolderFrames {
                     Err(error) => {
                         tracing::warn!(%error, "skipping image");
                         self.unreadable[index] = true;
+                        self.skipped.push(error);
                         continue;
                     }
                 },
@@ -235,6 +239,10 @@ impl FrameSource for FolderFrames {
 
     fn repeats_frames(&self) -> bool {
         self.looped
+    }
+
+    fn take_skipped(&mut self) -> Vec<SourceError> {
+        std::mem::take(&mut self.skipped)
     }
 }
 
@@ -299,6 +307,55 @@ mod tests {
             assert!(next(&mut uncached).is_ok());
         }
         assert_eq!(uncached.cached(), 0);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// Issue 40: JPEGs cut in half, cut to their headers and with stray bytes in their scan
+    /// are never given as frames (they used to come out partly grey); each is reported once
+    /// with its kind, naming the file, and the whole ones around them are given.
+    #[test]
+    fn truncated_and_corrupt_jpegs_in_a_folder_are_skipped_and_reported() {
+        let dir =
+            std::env::temp_dir().join(format!("conesight-sources-jpeg-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut jpeg = Vec::new();
+        let noise = image::RgbImage::from_fn(8, 6, |x, y| {
+            image::Rgb([(x * 31) as u8, (y * 40) as u8, 90])
+        });
+        image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpeg, 90)
+            .encode_image(&noise)
+            .unwrap();
+        let scan = jpeg.windows(2).position(|w| w == [0xff, 0xda]).unwrap();
+        let mut stray = jpeg.clone();
+        // Halfway through the entropy-coded data (after the 14-byte SOS segment, before EOI).
+        let inside = scan + 14 + (jpeg.len() - scan - 16) / 2;
+        stray[inside] = 0xff;
+        stray[inside + 1] = 0x42;
+        std::fs::write(dir.join("0.jpg"), &jpeg).unwrap();
+        std::fs::write(dir.join("1-half.jpg"), &jpeg[..jpeg.len() / 2]).unwrap();
+        std::fs::write(dir.join("2-headers.jpg"), &jpeg[..scan]).unwrap();
+        std::fs::write(dir.join("3-stray.jpg"), &stray).unwrap();
+        std::fs::write(dir.join("4.jpg"), &jpeg).unwrap();
+        let mut frames = open(&dir, 1, true);
+        let given: Vec<u64> = (0..4)
+            .map(|_| next(&mut frames).unwrap().frame.index)
+            .collect();
+        assert_eq!(given, vec![0, 4, 0, 4]);
+        let skipped = frames.take_skipped();
+        let kinds: Vec<&str> = skipped.iter().map(SourceError::kind).collect();
+        assert_eq!(
+            kinds,
+            vec!["image_truncated", "image_truncated", "image_corrupt"],
+            "{skipped:?}"
+        );
+        for (error, file) in skipped
+            .iter()
+            .zip(["1-half.jpg", "2-headers.jpg", "3-stray.jpg"])
+        {
+            assert!(error.to_string().contains(file), "{error}");
+        }
+        assert!(frames.take_skipped().is_empty(), "reported once");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 

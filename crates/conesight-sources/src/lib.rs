@@ -85,6 +85,9 @@ pub enum Next {
     Finished,
 }
 
+/// [`FrameSource::frame_lookup`]: the frame given as a sequence number.
+pub type FrameLookup = Arc<dyn Fn(u64) -> Option<CameraFrame> + Send + Sync>;
+
 /// Something that yields frames with their calibration. Blocking calls; the camera service
 /// makes them off its async threads.
 pub trait FrameSource: Send {
@@ -116,6 +119,23 @@ pub trait FrameSource: Send {
     /// with the error.
     fn is_live(&self) -> bool {
         false
+    }
+
+    /// The inputs skipped since the last call (an image of a folder that does not decode
+    /// completely, ...), each with why: the camera service counts them in
+    /// `conesight_errors_total{kind}` and logs them.
+    fn take_skipped(&mut self) -> Vec<SourceError> {
+        Vec::new()
+    }
+
+    /// The frame the source gives as frame `sequence` (of its first run), when its frames are
+    /// known: a preloaded synthetic sequence, including frames still rendering in the
+    /// background (the lookup then waits for that frame, which is there once the frame was
+    /// published). Unlike [`FrameSource::known_frames`] it does not wait for the whole
+    /// sequence, so a consumer that judges the pipeline against the truth does not hold the
+    /// camera's start back.
+    fn frame_lookup(&self) -> Option<FrameLookup> {
+        None
     }
 
     /// Every frame the source will give, when known up front (a preloaded synthetic

@@ -203,6 +203,27 @@ impl FrameSource for SyntheticFrames {
         matches!(self.frames, Frames::Preloaded(_) | Frames::Rendering(_))
     }
 
+    fn frame_lookup(&self) -> Option<crate::FrameLookup> {
+        match &self.frames {
+            Frames::Preloaded(frames) => {
+                let frames = frames.clone();
+                Some(Arc::new(move |sequence| {
+                    frames
+                        .get((sequence % frames.len().max(1) as u64) as usize)
+                        .cloned()
+                }))
+            }
+            Frames::Rendering(background) => {
+                let background = background.clone();
+                Some(Arc::new(move |sequence| {
+                    let slot = (sequence % background.total.max(1) as u64) as usize;
+                    background.frame(slot).ok().map(|(frame, _)| frame)
+                }))
+            }
+            Frames::Live(_) => None,
+        }
+    }
+
     fn known_frames(&self) -> Option<Arc<Vec<CameraFrame>>> {
         match &self.frames {
             Frames::Preloaded(frames) => Some(frames.clone()),

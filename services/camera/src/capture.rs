@@ -94,54 +94,55 @@ pub async fn run(
                 _ = ticker.tick() => {}
             }
         }
-        let item =
-            match tokio::task::block_in_place(|| source.next_frame(POLL_TIMEOUT)).and_then(|next| {
-                match next {
-                    Next::Frame(frame) => {
-                        check_size(&name, &frame.frame).map(|()| Next::Frame(frame))
-                    }
-                    other => Ok(other),
-                }
-            }) {
-                Ok(Next::Frame(frame)) => *frame,
-                Ok(Next::Pending) => {
-                    let waited = health.since_frame.elapsed();
-                    if waited >= stall_limit {
-                        let error = SourceError::Stalled {
-                            source_name: name.clone(),
-                            waited_ms: u64::try_from(waited.as_millis()).unwrap_or(u64::MAX),
-                        };
-                        if !health.down(&mut *source, &error, &shutdown).await {
-                            break;
-                        }
-                    }
-                    continue;
-                }
-                Ok(Next::Finished) => {
-                    tracing::info!(source = %name, frames = sequence, "source finished");
-                    node.readiness.set_source_up(false);
-                    node.readiness
-                        .set_detail("source", format!("finished: {name}"));
-                    break;
-                }
-                Err(error) => {
-                    if matches!(error, SourceError::SizeMismatch { .. })
-                        && (args.stop_on_size_mismatch || !source.is_live())
-                    {
-                        // Starting the source again would give the same frames: stop.
-                        node.errors.report(error.kind(), &error);
-                        node.readiness.set_source_up(false);
-                        node.readiness
-                            .set_detail("source", format!("stopped: {error}"));
-                        tokio::task::block_in_place(|| source.stop());
-                        return Err(error.into());
-                    }
+        let next = tokio::task::block_in_place(|| source.next_frame(POLL_TIMEOUT));
+        // Inputs the source skipped (a folder's image that does not decode completely):
+        // counted and logged, never published.
+        for skipped in source.take_skipped() {
+            node.errors.report(skipped.kind(), &skipped);
+        }
+        let item = match next.and_then(|next| match next {
+            Next::Frame(frame) => check_size(&name, &frame.frame).map(|()| Next::Frame(frame)),
+            other => Ok(other),
+        }) {
+            Ok(Next::Frame(frame)) => *frame,
+            Ok(Next::Pending) => {
+                let waited = health.since_frame.elapsed();
+                if waited >= stall_limit {
+                    let error = SourceError::Stalled {
+                        source_name: name.clone(),
+                        waited_ms: u64::try_from(waited.as_millis()).unwrap_or(u64::MAX),
+                    };
                     if !health.down(&mut *source, &error, &shutdown).await {
                         break;
                     }
-                    continue;
                 }
-            };
+                continue;
+            }
+            Ok(Next::Finished) => {
+                tracing::info!(source = %name, frames = sequence, "source finished");
+                node.readiness.set_source_up(false);
+                node.readiness
+                    .set_detail("source", format!("finished: {name}"));
+                break;
+            }
+            Err(error) => {
+                if matches!(error, SourceError::SizeMismatch { .. })
+                    && (args.stop_on_size_mismatch || !source.is_live())
+                {
+                    // Starting the source again would give the same frames: stop.
+                    node.errors.report(error.kind(), &error);
+                    node.readiness.set_source_up(false);
+                    node.readiness
+                        .set_detail("source", format!("stopped: {error}"));
+                    tokio::task::block_in_place(|| source.stop());
+                    return Err(error.into());
+                }
+                if !health.down(&mut *source, &error, &shutdown).await {
+                    break;
+                }
+                continue;
+            }
+        };
         health.frame_arrived();
         if last_info.is_none_or(|at| at.elapsed() >= CAMERA_INFO_PERIOD) {
             let mut header = pb::Header::new(camera_id, sequence, now_ns(), frame_id.clone());
