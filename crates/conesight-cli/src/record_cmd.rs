@@ -79,6 +79,12 @@ pub struct RecordArgs {
     /// Models the run uses, hashed (sha256) into the metadata, comma separated.
     #[arg(long, value_delimiter = ',')]
     models: Vec<PathBuf>,
+    /// Write a ROS 2 bag instead: `--out` names a new folder (`.mcap` dropped) with
+    /// metadata.yaml and an MCAP file in the rosbag2 profile (`ros2msg` schemas, CDR): frames
+    /// as sensor_msgs/Image or CompressedImage, calibration as sensor_msgs/CameraInfo, cones as
+    /// conesight_msgs/ConeArray, on /conesight/<camera>/... (`ros2 bag play` reads it).
+    #[arg(long)]
+    ros2: bool,
 }
 
 /// Runs `conesight record`.
@@ -94,9 +100,22 @@ pub fn run(args: RecordArgs) -> anyhow::Result<()> {
 async fn run_async(args: RecordArgs) -> anyhow::Result<()> {
     let shutdown = Shutdown::new();
     shutdown.trigger_on_signal();
+    // With --ros2 the bus is recorded as it is beside the bag folder, then converted.
+    let bag_dir = args.ros2.then(|| args.out.with_extension(""));
+    let recording = match &bag_dir {
+        Some(dir) => {
+            anyhow::ensure!(
+                !dir.exists(),
+                "{} exists already: a ROS 2 bag is a new folder (remove it or choose another --out)",
+                dir.display()
+            );
+            dir.with_extension("conesight-recording.mcap")
+        }
+        None => args.out.clone(),
+    };
     let session = open_session(&args.zenoh).await?;
     let topics = Topics::from_args(&args.zenoh)?;
-    let mut options = RecorderOptions::new(&args.out);
+    let mut options = RecorderOptions::new(&recording);
     options.streams = args.streams.iter().map(|s| Stream::from(*s)).collect();
     options.queue_len = args.queue_len;
     options.jpeg_quality = (args.record_frames == conesight_bus::FrameEncoding::Jpeg)
@@ -118,7 +137,7 @@ async fn run_async(args: RecordArgs) -> anyhow::Result<()> {
     }
     let recorder = Recorder::start(&session, &topics, options)
         .await
-        .with_context(|| format!("starting the recorder on {}", args.out.display()))?;
+        .with_context(|| format!("starting the recorder on {}", recording.display()))?;
     let foxglove = match &args.foxglove {
         Some(path) => Some(crate::foxglove_view::record(&session, &topics, path, &shutdown).await?),
         None => None,
@@ -126,7 +145,7 @@ async fn run_async(args: RecordArgs) -> anyhow::Result<()> {
     eprintln!(
         "recording conesight/{}/** into {} (Ctrl-C stops)",
         topics.namespace(),
-        recording_names(&args.out, args.split_size_mb, args.split_duration_s)
+        recording_names(&recording, args.split_size_mb, args.split_duration_s)
     );
     let started = Instant::now();
     let progress = indicatif::ProgressBar::new_spinner();
@@ -170,7 +189,40 @@ async fn run_async(args: RecordArgs) -> anyhow::Result<()> {
         started.elapsed().as_secs_f64(),
         display_paths(&files).join(", ")
     );
+    if let Some(dir) = bag_dir {
+        let (written, skipped) = tokio::task::block_in_place(|| export_bag(&files, &dir))?;
+        for file in &files {
+            let _ = std::fs::remove_file(file);
+        }
+        println!(
+            "ROS 2 bag {}: {written} messages ({skipped} detections and keypoints messages have no ROS 2 type and were left out)",
+            dir.display()
+        );
+    }
     Ok(())
+}
+
+/// The bus messages of the recording `files` written as the ROS 2 bag `dir`
+/// (`conesight_ros2::bag`): (messages written, messages with no ROS 2 type).
+pub(crate) fn export_bag(files: &[PathBuf], dir: &Path) -> anyhow::Result<(u64, u64)> {
+    let mut recording = conesight_replay::Recording::open(files)?;
+    let mut bag = conesight_ros2::bag::BagWriter::create(dir)?;
+    let mut written = 0;
+    while let Some(message) = recording.next_message()? {
+        match bag.write_bus(message.stream.as_str(), message.log_time_ns, &message.data) {
+            Ok(true) => written += 1,
+            Ok(false) => {}
+            Err(error) => tracing::warn!(
+                topic = %message.topic,
+                index = message.index,
+                %error,
+                "left out of the ROS 2 bag"
+            ),
+        }
+    }
+    let skipped = bag.skipped;
+    bag.finish()?;
+    Ok((written, skipped))
 }
 
 /// The files a recording `--out base` goes into, as the user reads them: `base` itself, or with

@@ -18,6 +18,17 @@ pub fn recording_files(inputs: &[PathBuf]) -> Result<Vec<PathBuf>, ReplayError> 
             files.push(input.clone());
             continue;
         }
+        // A rosbag2 bag: its folder (metadata.yaml and its MCAP files).
+        if input.is_dir() {
+            let bag = conesight_ros2::bag::bag_files(input).map_err(|error| {
+                ReplayError::NoRecording {
+                    path: input.clone(),
+                    first_split: PathBuf::from(error.to_string()),
+                }
+            })?;
+            files.extend(bag);
+            continue;
+        }
         let parts = split_parts(input)?;
         if parts.is_empty() {
             return Err(ReplayError::NoRecording {

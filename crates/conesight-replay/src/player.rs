@@ -109,7 +109,8 @@ pub struct ReplaySummary {
     /// Frames whose cones never came.
     pub frames_lost: u64,
     /// Recorded frames not published because their image does not decode completely (a JPEG
-    /// cut short or with stray bytes): logged with the file, the
+    /// cut short or with stray bytes), and ROS 2 messages of a bag that did not convert (a
+    /// wrong encoding, a step that does not match the width, a truncated CDR): logged with the file, the
     /// message's index and why; the replay goes on with the next frame.
     pub frames_refused: u64,
     /// Recorded messages of other streams, not published.
@@ -118,6 +119,9 @@ pub struct ReplaySummary {
     pub elapsed_s: f64,
     /// Files that ended short (every message before the cut was replayed).
     pub truncated_files: Vec<PathBuf>,
+    /// Cameras whose frames came with no camera info in the first seconds of the recording
+    /// (`ReplayOptions::prime_window`; a warning names each).
+    pub cameras_without_info: Vec<String>,
 }
 
 impl ReplaySummary {
@@ -140,7 +144,7 @@ fn frame_id(header: &pb::Header) -> FrameId {
 
 enum ReaderEvent {
     Message(RecordedMessage),
-    End(Vec<PathBuf>),
+    End(Vec<PathBuf>, u64),
     Failed(ReplayError),
 }
 
@@ -222,6 +226,16 @@ impl Player {
                 }
             }
         }
+        for camera in cameras.iter().filter(|camera| !infos.contains_key(*camera)) {
+            tracing::warn!(
+                camera,
+                "no camera info in the first {:.0} s of the recording: its frames reach the \
+                 localiser without a calibration (counted there as no_camera_info) unless one \
+                 comes later; record the camera's CameraInfo topic with its images",
+                self.options.prime_window.as_secs_f64()
+            );
+            self.summary.cameras_without_info.push(camera.clone());
+        }
         tokio::time::sleep(self.options.settle).await;
         self.primed = infos;
         self.publish_primed().await?;
@@ -281,8 +295,12 @@ impl Player {
             }
             let message = match event {
                 ReaderEvent::Message(message) => message,
-                ReaderEvent::End(truncated) => {
+                ReaderEvent::End(truncated, ros2_refused) => {
                     self.summary.truncated_files = truncated;
+                    self.summary.frames_refused += ros2_refused;
+                    progress
+                        .frames_refused
+                        .fetch_add(ros2_refused, Ordering::Relaxed);
                     break;
                 }
                 ReaderEvent::Failed(error) => {
@@ -497,7 +515,7 @@ fn read_loop(
         }
         let event = match recording.next_message() {
             Ok(Some(message)) => ReaderEvent::Message(message),
-            Ok(None) => ReaderEvent::End(recording.truncated()),
+            Ok(None) => ReaderEvent::End(recording.truncated(), recording.ros2_refused()),
             Err(error) => ReaderEvent::Failed(error),
         };
         progress

@@ -70,8 +70,12 @@ pub struct McapFile {
 struct FileState {
     /// Schema id -> (name, encoding).
     schemas: HashMap<u16, (String, String)>,
-    /// Channel id -> (topic, stream).
-    channels: HashMap<u16, (Arc<str>, Stream)>,
+    /// Channel id -> (topic, stream, the ROS 2 type its CDR messages are converted from).
+    channels: HashMap<u16, (Arc<str>, Stream, Option<Ros2Channel>)>,
+    /// ROS 2 channels of other types than images and camera info (skipped).
+    ignored: std::collections::HashSet<u16>,
+    /// ROS 2 messages that did not convert (skipped, counted).
+    ros2_refused: u64,
     metadata: BTreeMap<String, BTreeMap<String, String>>,
     messages: u64,
     bytes_read: u64,
@@ -133,6 +137,12 @@ impl McapFile {
     /// record).
     pub fn truncated(&self) -> bool {
         self.state.truncated
+    }
+
+    /// ROS 2 messages of this file skipped because they did not convert (a wrong encoding, a
+    /// step that does not match the width, a truncated CDR, an implausible calibration).
+    pub fn ros2_refused(&self) -> u64 {
+        self.state.ros2_refused
     }
 
     /// The metadata records read so far (`conesight`, `calibration/<key>`), by name.
@@ -258,6 +268,27 @@ impl FileState {
                         .get(&channel.schema_id)
                         .cloned()
                         .unwrap_or_else(|| ("(none)".to_owned(), String::new()));
+                    if encoding == "ros2msg" {
+                        match Ros2Channel::of_schema(&schema, &channel.topic) {
+                            Some(ros2) => {
+                                let stream = ros2.stream();
+                                self.channels.insert(
+                                    channel.id,
+                                    (Arc::from(channel.topic.as_str()), stream, Some(ros2)),
+                                );
+                            }
+                            None => {
+                                tracing::info!(
+                                    path = %path.display(),
+                                    topic = %channel.topic,
+                                    schema,
+                                    "ROS 2 channel skipped: conesight replays sensor_msgs/msg/Image,                                      CompressedImage and CameraInfo"
+                                );
+                                self.ignored.insert(channel.id);
+                            }
+                        }
+                        return Ok(None);
+                    }
                     let stream = stream_of_schema(&schema)
                         .filter(|_| encoding == conesight_record::SCHEMA_ENCODING);
                     let Some(stream) = stream else {
@@ -269,13 +300,19 @@ impl FileState {
                             known: known_schemas(),
                         });
                     };
-                    self.channels
-                        .insert(channel.id, (Arc::from(channel.topic.as_str()), stream));
+                    self.channels.insert(
+                        channel.id,
+                        (Arc::from(channel.topic.as_str()), stream, None),
+                    );
                 }
             }
             op::MESSAGE => {
                 if let mcap::records::Record::Message { header, data } = parse(data)? {
-                    let Some((topic, stream)) = self.channels.get(&header.channel_id) else {
+                    if self.ignored.contains(&header.channel_id) {
+                        return Ok(None);
+                    }
+                    let Some((topic, stream, ros2)) = self.channels.get_mut(&header.channel_id)
+                    else {
                         return Err(ReplayError::UnknownChannel {
                             path: path.to_path_buf(),
                             channel_id: header.channel_id,
@@ -283,13 +320,32 @@ impl FileState {
                     };
                     let index = self.messages;
                     self.messages += 1;
+                    let data = match ros2 {
+                        None => data.into_owned(),
+                        Some(ros2) => match ros2.convert(&data, header.log_time) {
+                            Ok(converted) => converted,
+                            Err(error) => {
+                                self.ros2_refused += 1;
+                                if self.ros2_refused.is_power_of_two() {
+                                    tracing::warn!(
+                                        path = %path.display(),
+                                        topic = %topic,
+                                        index,
+                                        refused = self.ros2_refused,
+                                        "ROS 2 message skipped: {error}"
+                                    );
+                                }
+                                return Ok(None);
+                            }
+                        },
+                    };
                     return Ok(Some(RecordedMessage {
                         file,
                         index,
                         topic: topic.clone(),
                         stream: *stream,
                         log_time_ns: header.log_time,
-                        data: data.into_owned(),
+                        data,
                     }));
                 }
             }
@@ -302,6 +358,124 @@ impl FileState {
             _ => {}
         }
         Ok(None)
+    }
+}
+
+/// A ROS 2 channel replayed: its messages converted to the bus's protobuf (camera id from
+/// the topic: its first name, `conesight` skipped, so `/front/image_raw` and
+/// `/front/camera_info` are camera `front`; sequence numbers counted per channel; acquisition
+/// time from the message's header stamp).
+#[derive(Debug)]
+struct Ros2Channel {
+    kind: Ros2Kind,
+    camera: String,
+    next_sequence: u64,
+}
+
+#[derive(Debug, Clone, Copy)]
+enum Ros2Kind {
+    Image,
+    CompressedImage,
+    CameraInfo,
+}
+
+impl Ros2Channel {
+    fn of_schema(schema: &str, topic: &str) -> Option<Self> {
+        let kind = match schema {
+            "sensor_msgs/msg/Image" => Ros2Kind::Image,
+            "sensor_msgs/msg/CompressedImage" => Ros2Kind::CompressedImage,
+            "sensor_msgs/msg/CameraInfo" => Ros2Kind::CameraInfo,
+            _ => return None,
+        };
+        let camera = topic
+            .split('/')
+            .filter(|part| !part.is_empty() && *part != "conesight")
+            .find(|part| !matches!(*part, "image_raw" | "image" | "camera_info" | "compressed"))
+            .map_or_else(
+                || "camera".to_owned(),
+                |part| {
+                    part.chars()
+                        .map(|c| {
+                            if c.is_ascii_alphanumeric() {
+                                c.to_ascii_lowercase()
+                            } else {
+                                '_'
+                            }
+                        })
+                        .collect()
+                },
+            );
+        Some(Self {
+            kind,
+            camera,
+            next_sequence: 0,
+        })
+    }
+
+    fn stream(&self) -> Stream {
+        match self.kind {
+            Ros2Kind::CameraInfo => Stream::CameraInfo,
+            Ros2Kind::Image | Ros2Kind::CompressedImage => Stream::Frame,
+        }
+    }
+
+    /// The CDR `data` as the bus's protobuf message.
+    fn convert(&mut self, data: &[u8], log_time_ns: u64) -> Result<Vec<u8>, String> {
+        use conesight_proto::pb;
+        use conesight_ros2::msg;
+        let header = |ros: &msg::Header, sequence: u64| {
+            let stamp = ros
+                .stamp
+                .to_ns()
+                .filter(|ns| *ns > 0)
+                .unwrap_or(log_time_ns);
+            let frame_id = if ros.frame_id.is_empty() {
+                format!("{}_optical", self.camera)
+            } else {
+                ros.frame_id.clone()
+            };
+            pb::Header::new(&self.camera, sequence, stamp, &frame_id)
+        };
+        let sequence = self.next_sequence;
+        let encoded = match self.kind {
+            Ros2Kind::Image => {
+                let image: msg::Image =
+                    conesight_ros2::from_cdr(data).map_err(|e| e.to_string())?;
+                let rgb =
+                    conesight_ros2::convert::rgb_from_image(&image).map_err(|e| e.to_string())?;
+                pb::ImageFrame::from_rgb(header(&image.header, sequence), &rgb).encode_to_vec()
+            }
+            Ros2Kind::CompressedImage => {
+                let image: msg::CompressedImage =
+                    conesight_ros2::from_cdr(data).map_err(|e| e.to_string())?;
+                let format = image.format.to_ascii_lowercase();
+                if !format.contains("jpeg") && !format.contains("jpg") {
+                    return Err(format!(
+                        "sensor_msgs/msg/CompressedImage format {:?}: conesight replays JPEG",
+                        image.format
+                    ));
+                }
+                let (width_px, height_px) = conesight_vision::decode::jpeg_size(&image.data)
+                    .map_err(|e| format!("sensor_msgs/msg/CompressedImage: {e}"))?;
+                pb::ImageFrame {
+                    header: Some(header(&image.header, sequence)),
+                    width_px,
+                    height_px,
+                    encoding: pb::ImageEncoding::Jpeg.into(),
+                    data: image.data.into(),
+                }
+                .encode_to_vec()
+            }
+            Ros2Kind::CameraInfo => {
+                let info: msg::CameraInfo =
+                    conesight_ros2::from_cdr(data).map_err(|e| e.to_string())?;
+                let camera =
+                    conesight_ros2::convert::camera_from_ros(&info).map_err(|e| e.to_string())?;
+                pb::CameraInfo::new(header(&info.header, sequence), &camera, None).encode_to_vec()
+            }
+        };
+        self.next_sequence += 1;
+        Ok(encoded)
     }
 }
 
@@ -374,6 +548,11 @@ impl Recording {
             .filter(|f| f.truncated())
             .map(|f| f.path().to_path_buf())
             .collect()
+    }
+
+    /// ROS 2 messages skipped because they did not convert, in every file so far.
+    pub fn ros2_refused(&self) -> u64 {
+        self.files.iter().map(McapFile::ros2_refused).sum()
     }
 
     /// The path of file `index`.

@@ -267,6 +267,45 @@ pub fn jpeg_end(data: &[u8]) -> Result<usize, DecodeError> {
     }
 }
 
+/// The width and height of a whole JPEG, pixels, from its frame header (SOF), without decoding
+/// the pixels; a JPEG that does not walk to its EOI ([`jpeg_end`]) or has no frame header is
+/// an error.
+pub fn jpeg_size(data: &[u8]) -> Result<(u32, u32), DecodeError> {
+    jpeg_end(data)?;
+    let mut pos = 2;
+    while let (Some(&0xff), Some(&marker)) = (data.get(pos), data.get(pos + 1)) {
+        if marker == 0xff {
+            pos += 1;
+            continue;
+        }
+        pos += 2;
+        if matches!(marker, 0x01 | 0xd0..=0xd9) {
+            continue;
+        }
+        let length = match (data.get(pos), data.get(pos + 1)) {
+            (Some(&high), Some(&low)) => usize::from(u16::from_be_bytes([high, low])),
+            _ => break,
+        };
+        // SOF0..SOF15 but DHT (c4), JPG (c8) and DAC (cc): precision, height, width.
+        if matches!(marker, 0xc0..=0xcf) && !matches!(marker, 0xc4 | 0xc8 | 0xcc) {
+            if let Some(sof) = data.get(pos + 2..pos + 7) {
+                let height = u32::from(u16::from_be_bytes([sof[1], sof[2]]));
+                let width = u32::from(u16::from_be_bytes([sof[3], sof[4]]));
+                return Ok((width, height));
+            }
+            break;
+        }
+        if marker == 0xda {
+            break;
+        }
+        pos += length;
+    }
+    Err(DecodeError::Corrupt {
+        format: "JPEG",
+        reason: "no frame header (SOF) before the scan".to_owned(),
+    })
+}
+
 /// Decodes a whole PNG to RGB8 (chunks walked to `IEND`, then `image`'s decoder).
 pub fn decode_png(data: &[u8], limits: DecodeLimits) -> Result<RgbImage, DecodeError> {
     png_end(data)?;

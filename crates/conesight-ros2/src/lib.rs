@@ -1,0 +1,59 @@
+//! ROS 2 interop for conesight.
+//!
+//! - [`msg`]: the messages as serde types in their `.msg` field order, with their `ros2msg`
+//!   definitions: `conesight_msgs/{Cone, ConeArray, Keypoint}` (from `ros2/conesight_msgs`,
+//!   the package a team builds with colcon) and the standard ones conesight reads and writes
+//!   (`sensor_msgs/{Image, CompressedImage, CameraInfo}`).
+//! - [`cdr`]: their CDR payloads, as ROS 2 puts them on the wire and in bags.
+//! - [`convert`]: from and to the bus's protobuf messages.
+//! - [`bag`]: rosbag2 bags in MCAP (the `ros2` profile: `ros2msg` schemas, `cdr` messages,
+//!   `metadata.yaml` beside), written by `conesight record --ros2` and read by `conesight
+//!   replay`.
+
+pub mod bag;
+pub mod cdr;
+pub mod convert;
+pub mod msg;
+
+pub use cdr::{from_cdr, to_cdr};
+
+/// What can go wrong between conesight and ROS 2.
+#[derive(Debug, thiserror::Error)]
+pub enum Ros2Error {
+    /// A CDR payload that does not decode as its type, or a value that cannot be encoded.
+    #[error("{type_name}: CDR: {reason}")]
+    Cdr {
+        /// The Rust type.
+        type_name: &'static str,
+        /// Why.
+        reason: String,
+    },
+    /// A message that decodes but cannot be used (a wrong encoding, a step that does not
+    /// match the width, an implausible calibration).
+    #[error("{type_name}: {reason}")]
+    Invalid {
+        /// The ROS 2 type.
+        type_name: &'static str,
+        /// Why, and what to change.
+        reason: String,
+    },
+    /// Reading or writing a bag.
+    #[error("{path}: {reason}")]
+    Bag {
+        /// The bag's file or folder.
+        path: std::path::PathBuf,
+        /// Why.
+        reason: String,
+    },
+}
+
+impl Ros2Error {
+    /// A short stable name for `conesight_errors_total{kind=...}`.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Self::Cdr { .. } => "ros2_cdr",
+            Self::Invalid { .. } => "ros2_invalid",
+            Self::Bag { .. } => "ros2_bag",
+        }
+    }
+}
