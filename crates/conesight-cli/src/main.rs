@@ -39,6 +39,7 @@ mod mount_cmd;
 mod predict;
 mod record_cmd;
 mod replay_cmd;
+mod ros2_zenoh;
 mod run;
 mod run_monitor;
 mod run_table;

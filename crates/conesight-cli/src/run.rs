@@ -144,6 +144,12 @@ pub struct RunArgs {
     /// `conesight foxglove --foxglove-addr` does (`--foxglove` still works).
     #[arg(long = "foxglove-addr", alias = "foxglove")]
     foxglove_addr: Option<std::net::SocketAddr>,
+    /// Publish the cones and the calibration as ROS 2 topics too: `zenoh` on this run's Zenoh
+    /// session in rmw_zenoh's format (Jazzy; `ROS_DOMAIN_ID`), `/conesight/<camera>/cones`
+    /// (conesight_msgs/msg/ConeArray) and `/conesight/<camera>/camera_info`. DDS is not built
+    /// yet.
+    #[arg(long, value_enum)]
+    ros2: Option<Ros2Output>,
     /// Output folder of the annotated frames and bird's-eye views (`frame_NNNN.png`,
     /// `frame_NNNN_bev.png`), whatever the source.
     #[arg(long, default_value = "out/run")]
@@ -155,6 +161,13 @@ pub struct RunArgs {
     /// drawn there), else stderr.
     #[arg(long = "log-file")]
     log_file: Option<PathBuf>,
+}
+
+/// Where `--ros2` publishes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Ros2Output {
+    /// rmw_zenoh's key expressions, attachments and liveliness tokens on this run's session.
+    Zenoh,
 }
 
 fn parse_source(text: &str) -> Result<SourceSpec, String> {
@@ -268,6 +281,13 @@ async fn run_async(args: RunArgs) -> anyhow::Result<()> {
     if let Some(addr) = args.dashboard_addr {
         let bound = crate::dashboard::serve(&session, &topics, addr, &shutdown).await?;
         println!("dashboard: http://{bound}/");
+    }
+    if args.ros2 == Some(Ros2Output::Zenoh) {
+        crate::ros2_zenoh::serve(&session, &topics, &shutdown).await?;
+        println!(
+            "ROS 2: cones and camera info over rmw_zenoh on /conesight/{}/...",
+            args.camera
+        );
     }
     if let Some(addr) = args.foxglove_addr {
         let bound = crate::foxglove_view::serve(&session, &topics, addr, &shutdown).await?;

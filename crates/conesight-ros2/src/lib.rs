@@ -14,6 +14,7 @@ pub mod bag;
 pub mod cdr;
 pub mod convert;
 pub mod msg;
+pub mod rmw_zenoh;
 
 pub use cdr::{from_cdr, to_cdr};
 

@@ -23,12 +23,12 @@ pub trait RosMessage: Serialize + for<'de> Deserialize<'de> {
 /// The `ros2msg` schema text of `M`: its fields, then each dependency after a line of 80 `=`
 /// and `MSG: package/Type` (the rosbag2 MCAP profile's schema encoding).
 pub fn definition<M: RosMessage>() -> String {
-    let mut text = normalise(M::TYPE, M::FIELDS);
+    let mut text = normalised_fields(M::TYPE, M::FIELDS);
     for (name, fields) in M::dependencies() {
         text.push_str(&"=".repeat(80));
         text.push('\n');
         text.push_str(&format!("MSG: {}\n", name.replace("/msg/", "/")));
-        text.push_str(&normalise(name, fields));
+        text.push_str(&normalised_fields(name, fields));
     }
     text
 }
@@ -36,7 +36,7 @@ pub fn definition<M: RosMessage>() -> String {
 /// The field and constant lines of a `.msg` text, comments and blank lines dropped, with
 /// types of the same package named in full (`Keypoint[]` in `conesight_msgs/msg/Cone` is
 /// `conesight_msgs/Keypoint[]`).
-fn normalise(type_name: &str, fields: &str) -> String {
+pub(crate) fn normalised_fields(type_name: &str, fields: &str) -> String {
     const PRIMITIVES: [&str; 16] = [
         "bool", "byte", "char", "float32", "float64", "int8", "uint8", "int16", "uint16", "int32",
         "uint32", "int64", "uint64", "string", "wstring", "time",
