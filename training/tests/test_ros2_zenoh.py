@@ -152,3 +152,187 @@ def test_cones_over_rmw_zenoh_decode_with_rosbags(tmp_path: Path) -> None:
     assert sequences[0] >= 1 and len(gids) == 1
     assert cones_seen > 20, cones_seen
     print(f"rmw_zenoh: {len(samples)} samples, {len(sequences)} ConeArray, {cones_seen} cones")
+
+
+def test_a_ros2_camera_topic_over_rmw_zenoh_gives_cones(tmp_path: Path) -> None:
+    """`--source ros2:/cam/image_raw`: an independent Zenoh peer publishes rendered frames as
+    sensor_msgs/Image (bgr8, serialised by rosbags) and their CameraInfo the way rmw_zenoh does;
+    the cones that come back over `--ros2 zenoh` are those `conesight predict` finds on the same
+    frames. A yuv422 image and a truncated CDR are skipped and counted by the camera."""
+    binary = find_binary()
+    if binary is None:
+        pytest.skip("target/*/conesight not built (cargo build -p conesight-cli)")
+    usage = subprocess.run([binary, "run", "--help"], capture_output=True, text=True).stdout
+    if "ros2:TOPIC" not in usage:
+        pytest.skip("this conesight binary has no `--source ros2:` (rebuild it)")
+    cv2 = pytest.importorskip("cv2")
+    import json
+
+    import numpy as np
+    import yaml
+
+    sim = tmp_path / "sim"
+    subprocess.run(
+        [binary, "sim", "--frames", "2", "--seed", "5", "--out", str(sim)],
+        check=True,
+        capture_output=True,
+    )
+    pngs = sorted((sim / "images").glob("*.png"))
+    calibration = sim / "camera_info" / f"{pngs[0].stem}.yaml"
+    calib = yaml.safe_load(calibration.read_text())
+    store = typestore()
+    types = store.types
+    Header, Time = types["std_msgs/msg/Header"], types["builtin_interfaces/msg/Time"]
+    Image, CameraInfo = types["sensor_msgs/msg/Image"], types["sensor_msgs/msg/CameraInfo"]
+    Roi = types["sensor_msgs/msg/RegionOfInterest"]
+    image_hash = store.hash_rihs01("sensor_msgs/msg/Image")
+    info_hash = store.hash_rihs01("sensor_msgs/msg/CameraInfo")
+    image_key = f"0/cam/image_raw/sensor_msgs::msg::dds_::Image_/{image_hash}"
+    info_key = f"0/cam/camera_info/sensor_msgs::msg::dds_::CameraInfo_/{info_hash}"
+    frames = [cv2.imread(str(png), cv2.IMREAD_COLOR) for png in pngs]
+
+    def header(stamp_ns: int):
+        stamp = Time(sec=stamp_ns // 10**9, nanosec=stamp_ns % 10**9)
+        return Header(stamp=stamp, frame_id="cam_optical")
+
+    def image(bgr, stamp_ns: int, encoding: str = "bgr8"):
+        return Image(
+            header=header(stamp_ns),
+            height=bgr.shape[0],
+            width=bgr.shape[1],
+            encoding=encoding,
+            is_bigendian=0,
+            step=bgr.shape[1] * 3,
+            data=np.ascontiguousarray(bgr).reshape(-1),
+        )
+
+    def info(stamp_ns: int):
+        return CameraInfo(
+            header=header(stamp_ns),
+            height=calib["image_height"],
+            width=calib["image_width"],
+            distortion_model="plumb_bob",
+            d=np.array(calib["distortion_coefficients"]["data"], dtype=np.float64),
+            k=np.array(calib["camera_matrix"]["data"], dtype=np.float64),
+            r=np.eye(3).flatten(),
+            p=np.array(calib["projection_matrix"]["data"], dtype=np.float64),
+            binning_x=0,
+            binning_y=0,
+            roi=Roi(x_offset=0, y_offset=0, height=0, width=0, do_rectify=False),
+        )
+
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    http = free_port()
+    env = {**os.environ, "RUST_LOG": "warn", "ROS_DOMAIN_ID": "0"}
+    run = subprocess.Popen(
+        [
+            *(binary, "run", "--source", "ros2:/cam/image_raw", "--camera", "cam"),
+            *("--ros2", "zenoh", "--namespace", f"pyros2src{free_port()}"),
+            *("--zenoh-listen", endpoint, "--frames", "0", "--http-base-port", str(http)),
+            *("--out", str(tmp_path / "run")),
+        ],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
+    stamps: dict[int, int] = {}
+    arrays: list = []
+    try:
+        config = zenoh.Config.from_json5(
+            f'{{mode: "peer", connect: {{endpoints: ["{endpoint}"]}}, '
+            'listen: {endpoints: ["tcp/127.0.0.1:0"]}, '
+            "scouting: {multicast: {enabled: false}, gossip: {enabled: false}}}"
+        )
+        deadline = time.monotonic() + 180
+        session = None
+        while session is None:
+            try:
+                session = zenoh.open(config)
+            except Exception:  # the run is still starting
+                if time.monotonic() > deadline:
+                    raise
+                time.sleep(0.5)
+        subscriber = session.declare_subscriber(
+            "0/conesight/cam/cones/**",
+            lambda sample: arrays.append(
+                store.deserialize_cdr(sample.payload.to_bytes(), "conesight_msgs/msg/ConeArray")
+            ),
+        )
+        gid = bytes(range(16))
+        sequence = 0
+
+        def put(key: str, payload: bytes) -> None:
+            nonlocal sequence
+            sequence += 1
+            attachment = struct.pack("<qqB", sequence, time.time_ns(), 16) + gid
+            session.put(key, payload, attachment=attachment)
+
+        bad_sent = False
+        while len({a.header.stamp.sec * 10**9 + a.header.stamp.nanosec for a in arrays}) < 4:
+            assert time.monotonic() < deadline, (len(arrays), run.poll())
+            index = len(stamps) % len(frames)
+            stamp_ns = time.time_ns()
+            put(info_key, bytes(store.serialize_cdr(info(stamp_ns), CameraInfo.__msgtype__)))
+            if not bad_sent and len(arrays) >= 1:
+                # Another encoding, then a CDR cut in half: both skipped and counted.
+                yuv = store.serialize_cdr(image(frames[0], stamp_ns, "yuv422"), Image.__msgtype__)
+                put(image_key, bytes(yuv))
+                time.sleep(0.6)
+                whole = bytes(store.serialize_cdr(image(frames[0], stamp_ns), Image.__msgtype__))
+                put(image_key, whole[: len(whole) // 2])
+                time.sleep(0.6)
+                bad_sent = True
+                continue
+            payload = store.serialize_cdr(image(frames[index], stamp_ns), Image.__msgtype__)
+            stamps[stamp_ns] = index
+            put(image_key, bytes(payload))
+            time.sleep(1.0)
+        subscriber.undeclare()
+        session.close()
+        metrics = urllib_get(f"http://127.0.0.1:{http}/metrics")
+    finally:
+        run.kill()
+        run.wait()
+
+    bad = sum(
+        float(line.rsplit(" ", 1)[1])
+        for line in metrics.splitlines()
+        if line.startswith("conesight_errors_total") and 'kind="source_bad_frame"' in line
+    )
+    assert bad >= 2, [line for line in metrics.splitlines() if "errors_total" in line]
+
+    predicted = subprocess.run(
+        [binary, "predict", *map(str, pngs), "--camera", str(calibration)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=True,
+    )
+    expected = [
+        [tuple(c["position_camera_m"]) for c in json.loads(line)["cones"]]
+        for line in predicted.stdout.strip().splitlines()
+    ]
+    compared = 0
+    for array in arrays:
+        stamp_ns = array.header.stamp.sec * 10**9 + array.header.stamp.nanosec
+        if stamp_ns not in stamps:
+            continue
+        want = expected[stamps[stamp_ns]]
+        got = [
+            (c.position_in_camera.x, c.position_in_camera.y, c.position_in_camera.z)
+            for c in array.cones
+        ]
+        assert len(got) == len(want), (len(got), len(want))
+        for position in want:
+            assert min(math.dist(position, other) for other in got) < 0.01
+        compared += 1
+    assert compared >= 3, compared
+    print(f"ros2 source: {compared} frames' cones equal predict's, {bad:.0f} bad images counted")
+
+
+def urllib_get(url: str) -> str:
+    import urllib.request
+
+    with urllib.request.urlopen(url, timeout=10) as response:
+        return response.read().decode()

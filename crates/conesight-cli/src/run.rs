@@ -70,9 +70,10 @@ pub struct RunArgs {
     /// pipeline takes them); GStreamer sources go at their own rate.
     #[arg(long = "rate-hz", default_value_t = 10.0)]
     rate_hz: f64,
-    /// Frame source: `synthetic` (rendered, with exact truth), `folder:DIR`, `video:PATH` or
+    /// Frame source: `synthetic` (rendered, with exact truth), `folder:DIR`, `video:PATH`,
     /// `gst:PIPELINE` (a GStreamer pipeline without its sink, e.g. `gst:v4l2src
-    /// device=/dev/video0`); every one but `synthetic` needs `--camera-info`.
+    /// device=/dev/video0`) or `ros2:TOPIC` (a ROS 2 image topic over rmw_zenoh, calibrated by
+    /// its CameraInfo); `folder`, `video` and `gst` need `--camera-info`.
     #[arg(long, default_value = "synthetic", value_parser = parse_source)]
     source: SourceSpec,
     /// Calibration of the camera of a non-synthetic source: ROS camera_info, OpenCV

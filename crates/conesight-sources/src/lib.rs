@@ -23,6 +23,7 @@ pub mod backoff;
 mod error;
 pub mod folder;
 pub mod gst;
+pub mod ros2;
 pub mod spec;
 pub mod synthetic;
 
@@ -121,6 +122,10 @@ pub trait FrameSource: Send {
         false
     }
 
+    /// The Zenoh session of the service that runs this source, for a source that subscribes to
+    /// the bus (`ros2:TOPIC`); called before [`FrameSource::start`]. Others ignore it.
+    fn use_session(&mut self, _session: &conesight_bus::zenoh::Session) {}
+
     /// The inputs skipped since the last call (an image of a folder that does not decode
     /// completely, ...), each with why: the camera service counts them in
     /// `conesight_errors_total{kind}` and logs them.
@@ -186,6 +191,8 @@ pub struct OpenParams {
     /// A video file or an image folder starts again at its end (else the source is finished
     /// there).
     pub looped: bool,
+    /// A ROS 2 topic's session, domain and calibration (`--source ros2:TOPIC`).
+    pub ros2: Option<ros2::Ros2Params>,
 }
 
 /// The source of `spec`: checks what can be checked before it starts (the calibration is
@@ -220,5 +227,16 @@ pub fn open(spec: &SourceSpec, params: &OpenParams) -> Result<Box<dyn FrameSourc
         }
         SourceSpec::Video(path) => Box::new(GstSource::video(path, calibration()?, params.looped)?),
         SourceSpec::Gst(pipeline) => Box::new(GstSource::pipeline(pipeline, calibration()?)?),
+        SourceSpec::Ros2(topic) => {
+            let ros2 = params
+                .ros2
+                .clone()
+                .ok_or_else(|| SourceError::InvalidSpec {
+                    spec: spec.to_string(),
+                    reason: "this command cannot take a ROS 2 topic (no Zenoh session settings)"
+                        .to_owned(),
+                })?;
+            Box::new(ros2::Ros2Frames::new(topic, ros2)?)
+        }
     })
 }

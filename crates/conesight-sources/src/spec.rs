@@ -22,15 +22,17 @@ pub enum SourceSpec {
     /// `v4l2src`, `aravissrc`, `nvarguscamerasrc ! nvvidconv`, `rtspsrc ! decodebin`, ...);
     /// conesight appends `videoconvert ! video/x-raw,format=RGB ! appsink`.
     Gst(String),
+    /// A ROS 2 image topic over rmw_zenoh (`ros2:/cam/image_raw`).
+    Ros2(String),
 }
 
 /// The forms `--source` takes, for error messages and `--help`.
-pub const SOURCE_GRAMMAR: &str = "synthetic | folder:DIR | video:PATH | gst:PIPELINE";
+pub const SOURCE_GRAMMAR: &str = "synthetic | folder:DIR | video:PATH | gst:PIPELINE | ros2:TOPIC";
 
 impl SourceSpec {
     /// True for the sources that need a calibration file (every one but `synthetic`).
     pub fn needs_calibration(&self) -> bool {
-        !matches!(self, Self::Synthetic)
+        !matches!(self, Self::Synthetic | Self::Ros2(_))
     }
 
     /// True for GStreamer sources (a pipeline or a video file).
@@ -45,6 +47,7 @@ impl SourceSpec {
             Self::Folder(_) => "folder",
             Self::Video(_) => "video",
             Self::Gst(_) => "gst",
+            Self::Ros2(_) => "ros2",
         }
     }
 }
@@ -88,6 +91,12 @@ impl FromStr for SourceSpec {
                 Ok(Self::Gst(pipeline.to_owned()))
             }
             ("gst", _) => Err(invalid("`gst:` needs a pipeline, e.g. `gst:v4l2src`")),
+            ("ros2", Some(topic)) if !topic.trim().trim_matches('/').is_empty() => {
+                Ok(Self::Ros2(format!("/{}", topic.trim().trim_matches('/'))))
+            }
+            ("ros2", _) => Err(invalid(
+                "`ros2:` needs an image topic, e.g. `ros2:/camera/image_raw`",
+            )),
             _ => Err(invalid("unknown kind")),
         }
     }
@@ -101,6 +110,7 @@ impl fmt::Display for SourceSpec {
             Self::Folder(Some(dir)) => write!(f, "folder:{}", dir.display()),
             Self::Video(path) => write!(f, "video:{}", path.display()),
             Self::Gst(pipeline) => write!(f, "gst:{pipeline}"),
+            Self::Ros2(topic) => write!(f, "ros2:{topic}"),
         }
     }
 }
@@ -123,6 +133,10 @@ mod tests {
                 SourceSpec::Folder(Some("/data/drive 1".into())),
             ),
             ("video:drive.avi", SourceSpec::Video("drive.avi".into())),
+            (
+                "ros2:/cam/image_raw",
+                SourceSpec::Ros2("/cam/image_raw".into()),
+            ),
             // A path with a colon keeps it: only the first one separates the kind.
             ("video:C:/x.mp4", SourceSpec::Video("C:/x.mp4".into())),
             (

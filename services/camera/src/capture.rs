@@ -78,6 +78,7 @@ pub async fn run(
             break;
         }
         if !health.started {
+            source.use_session(&node.session);
             match tokio::task::block_in_place(|| source.start()) {
                 Ok(()) => health.started_now(),
                 Err(error) => {

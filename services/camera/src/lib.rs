@@ -74,9 +74,10 @@ pub struct CameraArgs {
     /// Bus, HTTP and camera id.
     #[command(flatten)]
     pub common: CommonArgs,
-    /// Frame source: `synthetic`, `folder:DIR` (or `folder` with `--images`), `video:PATH`
-    /// or `gst:PIPELINE` (a GStreamer pipeline without its sink, e.g. `gst:v4l2src
-    /// device=/dev/video0 ! video/x-raw,width=1920,height=1080`).
+    /// Frame source: `synthetic`, `folder:DIR` (or `folder` with `--images`), `video:PATH`,
+    /// `gst:PIPELINE` (a GStreamer pipeline without its sink, e.g. `gst:v4l2src
+    /// device=/dev/video0 ! video/x-raw,width=1920,height=1080`) or `ros2:TOPIC` (a ROS 2
+    /// image topic over rmw_zenoh on this service's Zenoh settings and `ROS_DOMAIN_ID`).
     #[arg(long, env = "CONESIGHT_SOURCE", default_value = "synthetic", value_parser = parse_source)]
     pub source: SourceSpec,
     /// Image folder (with `--source folder`).
@@ -241,6 +242,19 @@ fn load_source_blocking(args: &CameraArgs, progress: bool) -> anyhow::Result<Box
             .flatten(),
         cache_mb: args.cache_mb,
         looped: args.source_loop,
+        ros2: match &spec {
+            SourceSpec::Ros2(_) => Some(conesight_sources::ros2::Ros2Params {
+                zenoh: args.common.zenoh.clone(),
+                domain: conesight_ros2::rmw_zenoh::domain_from_env().map_err(anyhow::Error::msg)?,
+                calibration: args.calibration()?,
+                extrinsics: match &args.extrinsics {
+                    Some(path) => conesight_core::Extrinsics::from_yaml_file(path)
+                        .with_context(|| format!("reading --extrinsics {}", path.display()))?,
+                    None => conesight_core::Extrinsics::paper_default(),
+                },
+            }),
+            _ => None,
+        },
     };
     Ok(conesight_sources::open(&spec, &params)?)
 }
