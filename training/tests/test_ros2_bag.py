@@ -36,6 +36,7 @@ STANDARD = (
     "sensor_msgs/msg/Image",
     "sensor_msgs/msg/CompressedImage",
     "sensor_msgs/msg/CameraInfo",
+    "visualization_msgs/msg/MarkerArray",
 )
 
 
@@ -148,6 +149,12 @@ def test_a_recorded_bag_decodes_with_rosbags_and_mcap_ros2(tmp_path: Path) -> No
                     assert cone.range_m > 0 and math.isfinite(cone.range_m)
                     assert len(cone.keypoints) in (0, 7)
                     keypoints_seen += len(cone.keypoints) == 7
+            if connection.msgtype == "visualization_msgs/msg/MarkerArray":
+                # A DELETEALL, then a cylinder standing on each cone's base.
+                assert message.markers[0].action == 3
+                for marker in message.markers[1:]:
+                    assert marker.type == 3 and marker.header.frame_id == "base_link"
+                    assert 0.3 < marker.scale.z < 0.6 and marker.color.a > 0.5
             if connection.msgtype == "sensor_msgs/msg/CompressedImage":
                 assert message.format == "jpeg" and bytes(message.data[:2]) == b"\xff\xd8"
             if connection.msgtype == "sensor_msgs/msg/CameraInfo":
@@ -156,6 +163,9 @@ def test_a_recorded_bag_decodes_with_rosbags_and_mcap_ros2(tmp_path: Path) -> No
     assert counts.get("sensor_msgs/msg/CompressedImage", 0) >= 8, counts
     assert counts.get("sensor_msgs/msg/CameraInfo", 0) >= 1, counts
     assert counts.get("conesight_msgs/msg/ConeArray", 0) >= 8, counts
+    assert (
+        counts.get("visualization_msgs/msg/MarkerArray") == counts["conesight_msgs/msg/ConeArray"]
+    )
     assert cones_seen > 50 and keypoints_seen > cones_seen // 2, (cones_seen, keypoints_seen)
 
     # mcap-ros2-support decodes from the schemas in the file alone.

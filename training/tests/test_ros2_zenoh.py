@@ -109,6 +109,10 @@ def test_cones_over_rmw_zenoh_decode_with_rosbags(tmp_path: Path) -> None:
     store = typestore()
     cone_hash = store.hash_rihs01("conesight_msgs/msg/ConeArray")
     info_hash = store.hash_rihs01("sensor_msgs/msg/CameraInfo")
+    marker_hash = store.hash_rihs01("visualization_msgs/msg/MarkerArray")
+    marker_key = (
+        f"7/conesight/front/cone_markers/visualization_msgs::msg::dds_::MarkerArray_/{marker_hash}"
+    )
     cone_key = f"7/conesight/front/cones/conesight_msgs::msg::dds_::ConeArray_/{cone_hash}"
     info_key = f"7/conesight/front/camera_info/sensor_msgs::msg::dds_::CameraInfo_/{info_hash}"
 
@@ -116,7 +120,11 @@ def test_cones_over_rmw_zenoh_decode_with_rosbags(tmp_path: Path) -> None:
     assert len(node) == 1 and node[0].endswith("/NN/%/%/conesight"), tokens
     zid = node[0].split("/")[2]
     publishers = {t.split("/")[9]: t for t in tokens if "/MP/" in t}
-    assert set(publishers) == {"%conesight%front%cones", "%conesight%front%camera_info"}, tokens
+    assert set(publishers) == {
+        "%conesight%front%cones",
+        "%conesight%front%cone_markers",
+        "%conesight%front%camera_info",
+    }, tokens
     cones_token = publishers["%conesight%front%cones"]
     assert cones_token.startswith(f"@ros2_lv/7/{zid}/0/")
     assert cones_token.endswith(f"/conesight_msgs::msg::dds_::ConeArray_/{cone_hash}/::,10:,:,:,,")
@@ -126,7 +134,7 @@ def test_cones_over_rmw_zenoh_decode_with_rosbags(tmp_path: Path) -> None:
     )
 
     keys = {key for key, *_ in samples}
-    assert keys == {cone_key, info_key}, keys
+    assert keys == {cone_key, marker_key, info_key}, keys
     sequences: list[int] = []
     gids = set()
     cones_seen = 0
@@ -145,6 +153,10 @@ def test_cones_over_rmw_zenoh_decode_with_rosbags(tmp_path: Path) -> None:
                 cones_seen += 1
                 assert 1 <= cone.cone_class <= 4 and math.isfinite(cone.position.x)
                 assert len(cone.keypoints) in (0, 7)
+        elif key == marker_key:
+            markers = store.deserialize_cdr(payload, "visualization_msgs/msg/MarkerArray")
+            assert markers.markers[0].action == 3
+            assert all(m.type == 3 for m in markers.markers[1:])
         else:
             info = store.deserialize_cdr(payload, "sensor_msgs/msg/CameraInfo")
             assert info.width == 1920 and info.k[0] > 100

@@ -1,7 +1,8 @@
 //! `conesight run --ros2 zenoh`: the run's cones and calibration as ROS 2 topics in rmw_zenoh's
 //! format on the run's own Zenoh session (`conesight_ros2::rmw_zenoh` has the formats):
 //! `/conesight/<camera>/cones` (`conesight_msgs/msg/ConeArray`, each cone with its keypoints
-//! from the same frame's keypoints message) and `/conesight/<camera>/camera_info`
+//! from the same frame's keypoints message), `/conesight/<camera>/cone_markers`
+//! (`visualization_msgs/msg/MarkerArray`, for RViz) and `/conesight/<camera>/camera_info`
 //! (`sensor_msgs/msg/CameraInfo`), published by node `conesight` on `ROS_DOMAIN_ID` (0 when
 //! unset). A message that does not convert is logged (rate-limited) and not published.
 
@@ -15,7 +16,7 @@ use conesight_bus::zenoh::liveliness::LivelinessToken;
 use conesight_bus::{Stream, Topics, declare_subscriber, decode};
 use conesight_pipeline::Shutdown;
 use conesight_proto::{ConeKeypoints, now_ns, pb};
-use conesight_ros2::msg::{CameraInfo, ConeArray, RosMessage};
+use conesight_ros2::msg::{CameraInfo, ConeArray, MarkerArray, RosMessage};
 use conesight_ros2::rmw_zenoh;
 
 /// The ROS 2 node's name.
@@ -201,7 +202,10 @@ async fn on_cones(
         .unwrap_or_default();
     let array = conesight_ros2::convert::cone_array(&header, &cones, keypoints);
     let topic = conesight_ros2::bag::topic(&header.camera_id, "cones");
-    output.publish::<ConeArray>(&topic, &array).await
+    output.publish::<ConeArray>(&topic, &array).await?;
+    let markers = conesight_ros2::convert::cone_markers(&array, &header.camera_id);
+    let topic = conesight_ros2::bag::topic(&header.camera_id, "cone_markers");
+    output.publish::<MarkerArray>(&topic, &markers).await
 }
 
 async fn on_camera_info(

@@ -8,7 +8,8 @@
 //!   `/conesight/C/image_raw/compressed` (`sensor_msgs/msg/CompressedImage`) for JPEG ones;
 //! - `/conesight/C/camera_info` (`sensor_msgs/msg/CameraInfo`);
 //! - `/conesight/C/cones` (`conesight_msgs/msg/ConeArray`), each cone with its keypoints from
-//!   the same frame's keypoints message when it was recorded.
+//!   the same frame's keypoints message when it was recorded;
+//! - `/conesight/C/cone_markers` (`visualization_msgs/msg/MarkerArray`): the cones for RViz.
 //!
 //! Detections and keypoints have no ROS 2 type of their own here: they are counted as skipped.
 
@@ -21,8 +22,10 @@ use conesight_proto::{ConeKeypoints, Message, pb};
 use serde::Serialize;
 
 use crate::Ros2Error;
-use crate::convert::{RosImage, camera_info, cone_array, ros_image};
-use crate::msg::{CameraInfo, CompressedImage, ConeArray, Image, RosMessage, definition};
+use crate::convert::{RosImage, camera_info, cone_array, cone_markers, ros_image};
+use crate::msg::{
+    CameraInfo, CompressedImage, ConeArray, Image, MarkerArray, RosMessage, definition,
+};
 
 /// Keypoints messages kept per camera to give the cones of their frame their keypoints.
 const KEYPOINTS_KEPT: usize = 64;
@@ -250,11 +253,18 @@ impl BagWriter {
                     .map(|(_, k)| k.as_slice())
                     .unwrap_or_default();
                 let array = cone_array(&header, &cones, keypoints);
+                let publish = header.publish_time_ns.max(1);
                 self.write::<ConeArray>(
                     &topic(&header.camera_id, "cones"),
                     log_time_ns,
-                    header.publish_time_ns.max(1),
+                    publish,
                     &array,
+                )?;
+                self.write::<MarkerArray>(
+                    &topic(&header.camera_id, "cone_markers"),
+                    log_time_ns,
+                    publish,
+                    &cone_markers(&array, &header.camera_id),
                 )?;
             }
             _ => {

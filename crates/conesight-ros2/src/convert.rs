@@ -8,8 +8,9 @@ use image::RgbImage;
 
 use crate::Ros2Error;
 use crate::msg::{
-    CameraInfo, CompressedImage, Cone, ConeArray, Header, Image, Keypoint, Point, RegionOfInterest,
-    Time, cone_class, ranging,
+    CameraInfo, ColorRgba, CompressedImage, Cone, ConeArray, Duration, Header, Image, Keypoint,
+    Marker, MarkerArray, Point, Pose, Quaternion, RegionOfInterest, Time, Vector3, cone_class,
+    marker_type, ranging,
 };
 
 /// The vehicle frame's id in ROS (REP-105's `base_link`).
@@ -96,6 +97,63 @@ pub fn cone_array(
         frame_sequence: header.frame_sequence,
         cones,
     }
+}
+
+/// The cones of one frame as RViz markers in the vehicle frame: a `DELETEALL` of the camera's
+/// namespace (the previous frame's cones go), then a cylinder of the cone's size and colour
+/// standing on each cone's base (0.5 s lifetime, so markers of a stopped pipeline fade).
+pub fn cone_markers(array: &ConeArray, camera: &str) -> MarkerArray {
+    let ns = format!("conesight/{camera}");
+    let mut markers = vec![Marker {
+        header: array.header.clone(),
+        ns: ns.clone(),
+        action: marker_type::DELETEALL,
+        ..Marker::default()
+    }];
+    for (index, cone) in array.cones.iter().enumerate() {
+        // FSG cones: small 228 x 228 x 325 mm, large 285 x 285 x 505 mm.
+        let (width, height) = if cone.cone_class == cone_class::LARGE_ORANGE {
+            (0.285, 0.505)
+        } else {
+            (0.228, 0.325)
+        };
+        let (r, g, b) = match cone.cone_class {
+            cone_class::BLUE => (0.1, 0.3, 1.0),
+            cone_class::YELLOW => (1.0, 0.9, 0.1),
+            cone_class::LARGE_ORANGE => (1.0, 0.35, 0.0),
+            _ => (1.0, 0.55, 0.0),
+        };
+        markers.push(Marker {
+            header: array.header.clone(),
+            ns: ns.clone(),
+            id: i32::try_from(index).unwrap_or(i32::MAX),
+            r#type: marker_type::CYLINDER,
+            action: marker_type::ADD,
+            pose: Pose {
+                position: Point {
+                    x: cone.position.x,
+                    y: cone.position.y,
+                    z: cone.position.z + height / 2.0,
+                },
+                orientation: Quaternion {
+                    w: 1.0,
+                    ..Quaternion::default()
+                },
+            },
+            scale: Vector3 {
+                x: width,
+                y: width,
+                z: height,
+            },
+            color: ColorRgba { r, g, b, a: 0.9 },
+            lifetime: Duration {
+                sec: 0,
+                nanosec: 500_000_000,
+            },
+            ..Marker::default()
+        });
+    }
+    MarkerArray { markers }
 }
 
 /// A calibration as `sensor_msgs/CameraInfo` (no rectification: `r` identity, `p` = `[K|0]`).

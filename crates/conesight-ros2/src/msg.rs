@@ -375,3 +375,177 @@ mod tests {
         );
     }
 }
+
+/// `geometry_msgs/msg/Quaternion`.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct Quaternion {
+    /// Vector part x.
+    pub x: f64,
+    /// Vector part y.
+    pub y: f64,
+    /// Vector part z.
+    pub z: f64,
+    /// Scalar part.
+    pub w: f64,
+}
+
+/// `geometry_msgs/msg/Pose`.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct Pose {
+    /// Position, metres.
+    pub position: Point,
+    /// Orientation.
+    pub orientation: Quaternion,
+}
+
+/// `geometry_msgs/msg/Vector3`.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct Vector3 {
+    /// x.
+    pub x: f64,
+    /// y.
+    pub y: f64,
+    /// z.
+    pub z: f64,
+}
+
+/// `std_msgs/msg/ColorRGBA`.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct ColorRgba {
+    /// Red, 0..1.
+    pub r: f32,
+    /// Green, 0..1.
+    pub g: f32,
+    /// Blue, 0..1.
+    pub b: f32,
+    /// Opacity, 0..1.
+    pub a: f32,
+}
+
+/// `builtin_interfaces/msg/Duration`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct Duration {
+    /// Seconds.
+    pub sec: i32,
+    /// Nanoseconds past `sec`.
+    pub nanosec: u32,
+}
+
+/// `visualization_msgs/msg/UVCoordinate`.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct UvCoordinate {
+    /// u.
+    pub u: f32,
+    /// v.
+    pub v: f32,
+}
+
+/// `visualization_msgs/msg/MeshFile`.
+#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct MeshFile {
+    /// The mesh's file name.
+    pub filename: String,
+    /// Its bytes.
+    #[serde(with = "serde_bytes")]
+    pub data: Vec<u8>,
+}
+
+/// `visualization_msgs/msg/Marker` (the same fields in Humble and Jazzy).
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct Marker {
+    /// Stamp and frame.
+    pub header: Header,
+    /// Namespace of the id.
+    pub ns: String,
+    /// Id within `ns`.
+    pub id: i32,
+    /// `marker_type::*`.
+    pub r#type: i32,
+    /// 0 add/modify, 2 delete, 3 delete all.
+    pub action: i32,
+    /// Pose of the shape.
+    pub pose: Pose,
+    /// Size, metres.
+    pub scale: Vector3,
+    /// Colour.
+    pub color: ColorRgba,
+    /// How long it stays without an update (0: for ever).
+    pub lifetime: Duration,
+    /// Follows its frame.
+    pub frame_locked: bool,
+    /// For lists of points.
+    pub points: Vec<Point>,
+    /// For lists of points.
+    pub colors: Vec<ColorRgba>,
+    /// Texture.
+    pub texture_resource: String,
+    /// Texture.
+    pub texture: CompressedImage,
+    /// Texture.
+    pub uv_coordinates: Vec<UvCoordinate>,
+    /// Text of a text marker.
+    pub text: String,
+    /// Mesh.
+    pub mesh_resource: String,
+    /// Mesh.
+    pub mesh_file: MeshFile,
+    /// Mesh.
+    pub mesh_use_embedded_materials: bool,
+}
+
+/// `Marker.type` and `Marker.action` values.
+pub mod marker_type {
+    /// A cylinder.
+    pub const CYLINDER: i32 = 3;
+    /// Text facing the viewer.
+    pub const TEXT_VIEW_FACING: i32 = 9;
+    /// Add or modify.
+    pub const ADD: i32 = 0;
+    /// Delete every marker of the namespace.
+    pub const DELETEALL: i32 = 3;
+}
+
+const MARKER_FIELDS: &str = "int32 ARROW=0\nint32 CUBE=1\nint32 SPHERE=2\nint32 CYLINDER=3\nint32 LINE_STRIP=4\nint32 LINE_LIST=5\nint32 CUBE_LIST=6\nint32 SPHERE_LIST=7\nint32 POINTS=8\nint32 TEXT_VIEW_FACING=9\nint32 MESH_RESOURCE=10\nint32 TRIANGLE_LIST=11\nint32 ARROW_STRIP=12\nint32 ADD=0\nint32 MODIFY=0\nint32 DELETE=2\nint32 DELETEALL=3\nstd_msgs/Header header\nstring ns\nint32 id\nint32 type\nint32 action\ngeometry_msgs/Pose pose\ngeometry_msgs/Vector3 scale\nstd_msgs/ColorRGBA color\nbuiltin_interfaces/Duration lifetime\nbool frame_locked\ngeometry_msgs/Point[] points\nstd_msgs/ColorRGBA[] colors\nstring texture_resource\nsensor_msgs/CompressedImage texture\nvisualization_msgs/UVCoordinate[] uv_coordinates\nstring text\nstring mesh_resource\nvisualization_msgs/MeshFile mesh_file\nbool mesh_use_embedded_materials\n";
+
+/// `visualization_msgs/msg/MarkerArray`.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct MarkerArray {
+    /// The markers.
+    pub markers: Vec<Marker>,
+}
+
+impl RosMessage for MarkerArray {
+    const TYPE: &'static str = "visualization_msgs/msg/MarkerArray";
+    const FIELDS: &'static str = "visualization_msgs/Marker[] markers\n";
+    fn dependencies() -> Vec<(&'static str, &'static str)> {
+        vec![
+            ("visualization_msgs/msg/Marker", MARKER_FIELDS),
+            ("std_msgs/msg/Header", HEADER_FIELDS),
+            ("builtin_interfaces/msg/Time", TIME_FIELDS),
+            (
+                "geometry_msgs/msg/Pose",
+                "geometry_msgs/Point position\ngeometry_msgs/Quaternion orientation\n",
+            ),
+            ("geometry_msgs/msg/Point", POINT_FIELDS),
+            (
+                "geometry_msgs/msg/Quaternion",
+                "float64 x\nfloat64 y\nfloat64 z\nfloat64 w\n",
+            ),
+            ("geometry_msgs/msg/Vector3", POINT_FIELDS),
+            (
+                "std_msgs/msg/ColorRGBA",
+                "float32 r\nfloat32 g\nfloat32 b\nfloat32 a\n",
+            ),
+            ("builtin_interfaces/msg/Duration", TIME_FIELDS),
+            ("sensor_msgs/msg/CompressedImage", CompressedImage::FIELDS),
+            (
+                "visualization_msgs/msg/UVCoordinate",
+                "float32 u\nfloat32 v\n",
+            ),
+            (
+                "visualization_msgs/msg/MeshFile",
+                "string filename\nuint8[] data\n",
+            ),
+        ]
+    }
+}

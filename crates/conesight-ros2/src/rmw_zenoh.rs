@@ -239,6 +239,10 @@ mod tests {
             rihs01::<CameraInfo>(),
             "RIHS01_b3dfd68ff46c9d56c80fd3bd4ed22c7a4ddce8c8348f2f59c299e73118e7e275"
         );
+        assert_eq!(
+            rihs01::<crate::msg::MarkerArray>(),
+            "RIHS01_86cb8800b6fb05b5eff1abd7a56f62a5641d3ae9a1c29e78e67e704f1d067dcf"
+        );
         assert!(rihs01::<ConeArray>().starts_with("RIHS01_"));
     }
 
