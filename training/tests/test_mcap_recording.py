@@ -6,35 +6,20 @@ the protobuf schema the file itself carries (`mcap_protobuf`), with no conesight
 Skipped when the `conesight` binary is not built.
 """
 
-import socket
 import subprocess
 from pathlib import Path
 
 import pytest
+from conesight_process import find_binary, free_port
 
 mcap_reader = pytest.importorskip("mcap.reader")
 mcap_protobuf = pytest.importorskip("mcap_protobuf.decoder")
 
-REPO_ROOT = Path(__file__).resolve().parents[2]
 EXPECTED_SCHEMAS = {
     "conesight.v1.ImageFrame",
     "conesight.v1.CameraInfo",
     "conesight.v1.Detections",
 }
-
-
-def find_binary() -> Path | None:
-    for candidate in ("release/conesight", "debug/conesight"):
-        path = REPO_ROOT / "target" / candidate
-        if path.is_file():
-            return path
-    return None
-
-
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
 
 
 def test_every_message_decodes_with_the_schema_the_file_carries(tmp_path: Path) -> None:

@@ -15,12 +15,19 @@ Skipped when the `conesight` binary is not built or rosbags / mcap-ros2-support 
 import json
 import math
 import os
-import socket
 import subprocess
 import time
 from pathlib import Path
 
 import pytest
+from conesight_process import (
+    MSG_DIR,
+    bgr8_image_msg,
+    camera_info_msg,
+    find_binary,
+    free_port,
+    ros2_typestore,
+)
 
 rosbags_typesys = pytest.importorskip("rosbags.typesys")
 rosbags_highlevel = pytest.importorskip("rosbags.highlevel")
@@ -30,22 +37,12 @@ mcap_ros2_decoder = pytest.importorskip("mcap_ros2.decoder")
 mcap_protobuf = pytest.importorskip("mcap_protobuf.decoder")
 cv2 = pytest.importorskip("cv2")
 
-REPO_ROOT = Path(__file__).resolve().parents[2]
-MSG_DIR = REPO_ROOT / "ros2" / "conesight_msgs" / "msg"
 STANDARD = (
     "sensor_msgs/msg/Image",
     "sensor_msgs/msg/CompressedImage",
     "sensor_msgs/msg/CameraInfo",
     "visualization_msgs/msg/MarkerArray",
 )
-
-
-def find_binary() -> Path | None:
-    for candidate in ("release/conesight", "debug/conesight"):
-        path = REPO_ROOT / "target" / candidate
-        if path.is_file():
-            return path
-    return None
 
 
 def needs_binary() -> Path:
@@ -58,25 +55,8 @@ def needs_binary() -> Path:
     return binary
 
 
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
-
-
-def typestore():
-    """ROS 2 Jazzy's types plus conesight_msgs, parsed from the package's .msg files."""
-    store = rosbags_typesys.get_typestore(rosbags_typesys.Stores.ROS2_JAZZY)
-    types = {}
-    for name in ("Keypoint", "Cone", "ConeArray"):
-        text = (MSG_DIR / f"{name}.msg").read_text()
-        types.update(rosbags_typesys.get_types_from_msg(text, f"conesight_msgs/msg/{name}"))
-    store.register(types)
-    return store
-
-
 def test_the_message_package_parses_with_the_rosbags_parser() -> None:
-    store = typestore()
+    store = ros2_typestore()
     cone = store.types["conesight_msgs/msg/Cone"]
     assert cone.CLASS_LARGE_ORANGE == 4 and cone.RANGING_KEYPOINTS_BOX_REFUSED == 4
     fields = [name for name, _ in store.fielddefs["conesight_msgs/msg/ConeArray"][1]]
@@ -125,7 +105,7 @@ def test_a_recorded_bag_decodes_with_rosbags_and_mcap_ros2(tmp_path: Path) -> No
     assert (bag / "metadata.yaml").is_file() and list(bag.glob("*.mcap"))
     assert not list(tmp_path.glob("*.conesight-recording.mcap")), "the bus recording was kept"
 
-    store = typestore()
+    store = ros2_typestore()
     counts: dict[str, int] = {}
     cones_seen = keypoints_seen = 0
     with rosbags_highlevel.AnyReader([bag], default_typestore=store) as reader:
@@ -204,51 +184,25 @@ def test_a_rosbags_bag_of_images_replays_to_the_cones_of_its_frames(tmp_path: Pa
     store = rosbags_typesys.get_typestore(rosbags_typesys.Stores.ROS2_JAZZY)
     types = store.types
     Header, Time = types["std_msgs/msg/Header"], types["builtin_interfaces/msg/Time"]
-    Image, CameraInfo = types["sensor_msgs/msg/Image"], types["sensor_msgs/msg/CameraInfo"]
-    Roi = types["sensor_msgs/msg/RegionOfInterest"]
-    import numpy as np
+    image_type, info_type = "sensor_msgs/msg/Image", "sensor_msgs/msg/CameraInfo"
     import yaml
 
     calib = yaml.safe_load(calibration.read_text())
-    k = np.array(calib["camera_matrix"]["data"], dtype=np.float64)
     bag = tmp_path / "team_bag"
     start_ns = 1_700_000_000_000_000_000
     with rosbags_rosbag2.Writer(
         bag, version=8, storage_plugin=rosbags_rosbag2.StoragePlugin.MCAP
     ) as writer:
-        image_conn = writer.add_connection("/cam/image_raw", Image.__msgtype__, typestore=store)
-        info_conn = writer.add_connection(
-            "/cam/camera_info", CameraInfo.__msgtype__, typestore=store
-        )
+        image_conn = writer.add_connection("/cam/image_raw", image_type, typestore=store)
+        info_conn = writer.add_connection("/cam/camera_info", info_type, typestore=store)
         for index, png in enumerate(pngs):
             stamp_ns = start_ns + index * 200_000_000
             stamp = Time(sec=stamp_ns // 10**9, nanosec=stamp_ns % 10**9)
             header = Header(stamp=stamp, frame_id="cam_optical")
-            info = CameraInfo(
-                header=header,
-                height=calib["image_height"],
-                width=calib["image_width"],
-                distortion_model="plumb_bob",
-                d=np.array(calib["distortion_coefficients"]["data"], dtype=np.float64),
-                k=k,
-                r=np.eye(3).flatten(),
-                p=np.array(calib["projection_matrix"]["data"], dtype=np.float64),
-                binning_x=0,
-                binning_y=0,
-                roi=Roi(x_offset=0, y_offset=0, height=0, width=0, do_rectify=False),
-            )
-            writer.write(info_conn, stamp_ns, store.serialize_cdr(info, CameraInfo.__msgtype__))
-            bgr = cv2.imread(str(png), cv2.IMREAD_COLOR)
-            image = Image(
-                header=header,
-                height=bgr.shape[0],
-                width=bgr.shape[1],
-                encoding="bgr8",
-                is_bigendian=0,
-                step=bgr.shape[1] * 3,
-                data=np.ascontiguousarray(bgr).reshape(-1),
-            )
-            writer.write(image_conn, stamp_ns + 1, store.serialize_cdr(image, Image.__msgtype__))
+            info = camera_info_msg(store, calib, header)
+            writer.write(info_conn, stamp_ns, store.serialize_cdr(info, info_type))
+            image = bgr8_image_msg(store, cv2.imread(str(png), cv2.IMREAD_COLOR), header)
+            writer.write(image_conn, stamp_ns + 1, store.serialize_cdr(image, image_type))
 
     # The services, and the bag replayed into them.
     endpoint = f"tcp/127.0.0.1:{free_port()}"

@@ -13,43 +13,23 @@ Skipped when the `conesight` binary is not built or eclipse-zenoh / rosbags are 
 
 import math
 import os
-import socket
 import struct
 import subprocess
 import time
 from pathlib import Path
 
 import pytest
+from conesight_process import (
+    bgr8_image_msg,
+    camera_info_msg,
+    find_binary,
+    free_port,
+    open_zenoh_peer,
+    ros2_typestore,
+)
 
 zenoh = pytest.importorskip("zenoh")
 rosbags_typesys = pytest.importorskip("rosbags.typesys")
-
-REPO_ROOT = Path(__file__).resolve().parents[2]
-MSG_DIR = REPO_ROOT / "ros2" / "conesight_msgs" / "msg"
-
-
-def find_binary() -> Path | None:
-    for candidate in ("release/conesight", "debug/conesight"):
-        path = REPO_ROOT / "target" / candidate
-        if path.is_file():
-            return path
-    return None
-
-
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
-
-
-def typestore():
-    store = rosbags_typesys.get_typestore(rosbags_typesys.Stores.ROS2_JAZZY)
-    types = {}
-    for name in ("Keypoint", "Cone", "ConeArray"):
-        text = (MSG_DIR / f"{name}.msg").read_text()
-        types.update(rosbags_typesys.get_types_from_msg(text, f"conesight_msgs/msg/{name}"))
-    store.register(types)
-    return store
 
 
 def test_cones_over_rmw_zenoh_decode_with_rosbags(tmp_path: Path) -> None:
@@ -74,20 +54,8 @@ def test_cones_over_rmw_zenoh_decode_with_rosbags(tmp_path: Path) -> None:
     )
     samples: list[tuple[str, bytes, bytes | None, float]] = []
     try:
-        config = zenoh.Config.from_json5(
-            f'{{mode: "peer", connect: {{endpoints: ["{endpoint}"]}}, '
-            'listen: {endpoints: ["tcp/127.0.0.1:0"]}, '
-            "scouting: {multicast: {enabled: false}, gossip: {enabled: false}}}"
-        )
         deadline = time.monotonic() + 120
-        session = None
-        while session is None:
-            try:
-                session = zenoh.open(config)
-            except Exception:  # the run is still starting
-                if time.monotonic() > deadline:
-                    raise
-                time.sleep(0.5)
+        session = open_zenoh_peer(endpoint, deadline)
 
         def on_sample(sample) -> None:
             attachment = sample.attachment.to_bytes() if sample.attachment is not None else None
@@ -106,7 +74,7 @@ def test_cones_over_rmw_zenoh_decode_with_rosbags(tmp_path: Path) -> None:
         run.kill()
         run.wait()
 
-    store = typestore()
+    store = ros2_typestore()
     cone_hash = store.hash_rihs01("conesight_msgs/msg/ConeArray")
     info_hash = store.hash_rihs01("sensor_msgs/msg/CameraInfo")
     marker_hash = store.hash_rihs01("visualization_msgs/msg/MarkerArray")
@@ -180,7 +148,6 @@ def test_a_ros2_camera_topic_over_rmw_zenoh_gives_cones(tmp_path: Path) -> None:
     cv2 = pytest.importorskip("cv2")
     import json
 
-    import numpy as np
     import yaml
 
     sim = tmp_path / "sim"
@@ -192,11 +159,10 @@ def test_a_ros2_camera_topic_over_rmw_zenoh_gives_cones(tmp_path: Path) -> None:
     pngs = sorted((sim / "images").glob("*.png"))
     calibration = sim / "camera_info" / f"{pngs[0].stem}.yaml"
     calib = yaml.safe_load(calibration.read_text())
-    store = typestore()
+    store = ros2_typestore()
     types = store.types
     Header, Time = types["std_msgs/msg/Header"], types["builtin_interfaces/msg/Time"]
     Image, CameraInfo = types["sensor_msgs/msg/Image"], types["sensor_msgs/msg/CameraInfo"]
-    Roi = types["sensor_msgs/msg/RegionOfInterest"]
     image_hash = store.hash_rihs01("sensor_msgs/msg/Image")
     info_hash = store.hash_rihs01("sensor_msgs/msg/CameraInfo")
     image_key = f"0/cam/image_raw/sensor_msgs::msg::dds_::Image_/{image_hash}"
@@ -208,30 +174,10 @@ def test_a_ros2_camera_topic_over_rmw_zenoh_gives_cones(tmp_path: Path) -> None:
         return Header(stamp=stamp, frame_id="cam_optical")
 
     def image(bgr, stamp_ns: int, encoding: str = "bgr8"):
-        return Image(
-            header=header(stamp_ns),
-            height=bgr.shape[0],
-            width=bgr.shape[1],
-            encoding=encoding,
-            is_bigendian=0,
-            step=bgr.shape[1] * 3,
-            data=np.ascontiguousarray(bgr).reshape(-1),
-        )
+        return bgr8_image_msg(store, bgr, header(stamp_ns), encoding)
 
     def info(stamp_ns: int):
-        return CameraInfo(
-            header=header(stamp_ns),
-            height=calib["image_height"],
-            width=calib["image_width"],
-            distortion_model="plumb_bob",
-            d=np.array(calib["distortion_coefficients"]["data"], dtype=np.float64),
-            k=np.array(calib["camera_matrix"]["data"], dtype=np.float64),
-            r=np.eye(3).flatten(),
-            p=np.array(calib["projection_matrix"]["data"], dtype=np.float64),
-            binning_x=0,
-            binning_y=0,
-            roi=Roi(x_offset=0, y_offset=0, height=0, width=0, do_rectify=False),
-        )
+        return camera_info_msg(store, calib, header(stamp_ns))
 
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     http = free_port()
@@ -251,20 +197,8 @@ def test_a_ros2_camera_topic_over_rmw_zenoh_gives_cones(tmp_path: Path) -> None:
     stamps: dict[int, int] = {}
     arrays: list = []
     try:
-        config = zenoh.Config.from_json5(
-            f'{{mode: "peer", connect: {{endpoints: ["{endpoint}"]}}, '
-            'listen: {endpoints: ["tcp/127.0.0.1:0"]}, '
-            "scouting: {multicast: {enabled: false}, gossip: {enabled: false}}}"
-        )
         deadline = time.monotonic() + 180
-        session = None
-        while session is None:
-            try:
-                session = zenoh.open(config)
-            except Exception:  # the run is still starting
-                if time.monotonic() > deadline:
-                    raise
-                time.sleep(0.5)
+        session = open_zenoh_peer(endpoint, deadline)
         subscriber = session.declare_subscriber(
             "0/conesight/cam/cones/**",
             lambda sample: arrays.append(

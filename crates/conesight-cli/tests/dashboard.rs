@@ -242,21 +242,8 @@ async fn dashboard_in_chromium_shows_cones_that_move() {
         );
         tokio::time::sleep(Duration::from_millis(250)).await;
     };
-    let shot = |result: Value| {
-        base64::engine::general_purpose::STANDARD
-            .decode(result["data"].as_str().unwrap())
-            .unwrap()
-    };
     id += 1;
-    let png1 = shot(
-        call(
-            &mut socket,
-            id,
-            "Page.captureScreenshot",
-            json!({ "format": "png" }),
-        )
-        .await,
-    );
+    let png1 = screenshot(&mut socket, id).await;
     tokio::time::sleep(Duration::from_secs(1)).await;
     // The drive loops over LOOP_FRAMES frames: a frame a whole number of loops later is the same
     // image with the same cones, so read again until the page shows a different frame of the loop
@@ -267,15 +254,7 @@ async fn dashboard_in_chromium_shows_cones_that_move() {
         id += 1;
         let second = read(eval(&mut socket, id, state).await);
         id += 1;
-        let png2 = shot(
-            call(
-                &mut socket,
-                id,
-                "Page.captureScreenshot",
-                json!({ "format": "png" }),
-            )
-            .await,
-        );
+        let png2 = screenshot(&mut socket, id).await;
         let same_image = match (sequence(&first), sequence(&second)) {
             (Some(a), Some(b)) => b.abs_diff(a) % common_process::LOOP_FRAMES == 0,
             _ => false,
@@ -381,36 +360,13 @@ fn cone_at_height(
 /// inside it, in its colour.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_dashboard_map_follows_the_farthest_cone() {
-    use conesight_bus::{Stream, Topics, ZenohArgs, encode, open_session};
+    use conesight_bus::{Stream, encode};
     let Some(chromium) = chromium() else {
         return;
     };
     let dir = TempDir::new("dashboard-far");
-    let namespace = format!("far{}", std::process::id());
-    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
-    let port = free_port();
+    let (_dashboard, port, session, topics) = dashboard_on_bus(&dir, "far").await;
     let addr = format!("127.0.0.1:{port}");
-    let _dashboard = common_process::Process::start(
-        "dashboard",
-        &[
-            "dashboard",
-            "--namespace",
-            &namespace,
-            "--zenoh-listen",
-            &endpoint,
-            "--dashboard-addr",
-            &addr,
-        ],
-        &dir.join("dashboard.log"),
-    );
-    let args = ZenohArgs {
-        connect: vec![endpoint],
-        listen: vec!["tcp/127.0.0.1:0".to_owned()],
-        namespace,
-        ..ZenohArgs::default()
-    };
-    let session = open_session(&args).await.unwrap();
-    let topics = Topics::from_args(&args).unwrap();
     let key = topics.key("front", Stream::Cones).unwrap();
     let cones = [
         cone_at(conesight_core::ConeClass::Blue, 8.0, 2.0),
@@ -508,36 +464,13 @@ async fn the_dashboard_map_follows_the_farthest_cone() {
 /// `conesight mount` command, drawn on the page.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_dashboard_shows_a_banner_when_the_cones_float() {
-    use conesight_bus::{Stream, Topics, ZenohArgs, encode, open_session};
+    use conesight_bus::{Stream, encode};
     let Some(chromium) = chromium() else {
         return;
     };
     let dir = TempDir::new("dashboard-mount");
-    let namespace = format!("mount{}", std::process::id());
-    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
-    let port = free_port();
+    let (_dashboard, port, session, topics) = dashboard_on_bus(&dir, "mount").await;
     let addr = format!("127.0.0.1:{port}");
-    let _dashboard = common_process::Process::start(
-        "dashboard",
-        &[
-            "dashboard",
-            "--namespace",
-            &namespace,
-            "--zenoh-listen",
-            &endpoint,
-            "--dashboard-addr",
-            &addr,
-        ],
-        &dir.join("dashboard.log"),
-    );
-    let args = ZenohArgs {
-        connect: vec![endpoint],
-        listen: vec!["tcp/127.0.0.1:0".to_owned()],
-        namespace,
-        ..ZenohArgs::default()
-    };
-    let session = open_session(&args).await.unwrap();
-    let topics = Topics::from_args(&args).unwrap();
     let key = topics.key("front", Stream::Cones).unwrap();
     // 20 cones a frame, 4-25 m ahead on both sides, their bases `lift_m` above the road.
     let frame = |lift_m: f64| -> Vec<conesight_proto::LocatedCone> {
@@ -681,34 +614,10 @@ async fn the_dashboard_shows_a_banner_when_the_cones_float() {
 /// new run as a stream restart, not as lost frames.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_dashboard_refuses_bad_cones_and_counts_lost_frames_and_restarts() {
-    use conesight_bus::{Stream, Topics, ZenohArgs, encode, open_session};
+    use conesight_bus::{Stream, encode};
     use conesight_proto::pb;
     let dir = TempDir::new("dashboard-bad");
-    let namespace = format!("bad{}", std::process::id());
-    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
-    let port = free_port();
-    let addr = format!("127.0.0.1:{port}");
-    let _dashboard = common_process::Process::start(
-        "dashboard",
-        &[
-            "dashboard",
-            "--namespace",
-            &namespace,
-            "--zenoh-listen",
-            &endpoint,
-            "--dashboard-addr",
-            &addr,
-        ],
-        &dir.join("dashboard.log"),
-    );
-    let args = ZenohArgs {
-        connect: vec![endpoint],
-        listen: vec!["tcp/127.0.0.1:0".to_owned()],
-        namespace,
-        ..ZenohArgs::default()
-    };
-    let session = open_session(&args).await.unwrap();
-    let topics = Topics::from_args(&args).unwrap();
+    let (_dashboard, port, session, topics) = dashboard_on_bus(&dir, "bad").await;
     let key = topics.key("front", Stream::Cones).unwrap();
     let cones = [
         cone_at(conesight_core::ConeClass::Blue, 8.0, 2.0),
@@ -786,4 +695,45 @@ async fn the_dashboard_refuses_bad_cones_and_counts_lost_frames_and_restarts() {
     assert_eq!(count(&after, "cone_stream_restarts"), 1);
     assert_eq!(count(&after, "sequence"), 0);
     let _ = session.close().await;
+}
+
+/// `conesight dashboard` of a namespace `name` + this process's id, listening on its own
+/// endpoint, and a Zenoh session of this test connected to it: (process, HTTP port, session,
+/// topics).
+async fn dashboard_on_bus(
+    dir: &TempDir,
+    name: &str,
+) -> (
+    common_process::Process,
+    u16,
+    conesight_bus::zenoh::Session,
+    conesight_bus::Topics,
+) {
+    use conesight_bus::{Topics, ZenohArgs, open_session};
+    let namespace = format!("{name}{}", std::process::id());
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let port = free_port();
+    let addr = format!("127.0.0.1:{port}");
+    let dashboard = common_process::Process::start(
+        "dashboard",
+        &[
+            "dashboard",
+            "--namespace",
+            &namespace,
+            "--zenoh-listen",
+            &endpoint,
+            "--dashboard-addr",
+            &addr,
+        ],
+        &dir.join("dashboard.log"),
+    );
+    let args = ZenohArgs {
+        connect: vec![endpoint],
+        listen: vec!["tcp/127.0.0.1:0".to_owned()],
+        namespace,
+        ..ZenohArgs::default()
+    };
+    let session = open_session(&args).await.unwrap();
+    let topics = Topics::from_args(&args).unwrap();
+    (dashboard, port, session, topics)
 }

@@ -3,14 +3,13 @@
 //! camera and sequence kept and acquisition stamps in replay time.
 #![allow(clippy::unwrap_used, clippy::expect_used, missing_docs)]
 
-use std::sync::atomic::AtomicBool;
-use std::sync::{Arc, Mutex};
+mod common;
+
 use std::time::{Duration, Instant};
 
-use conesight_bus::{Stream, declare_callback_subscriber, loopback_pair};
+use conesight_bus::Stream;
 use conesight_proto::{Message, now_ns, pb};
 use conesight_record::{McapSink, SinkOptions};
-use conesight_replay::{Pacing, Player, ReplayOptions, ReplayProgress};
 
 const STEP_NS: u64 = 100_000_000;
 
@@ -56,59 +55,10 @@ async fn a_recording_is_replayed_into_another_namespace_at_the_given_rate() {
     std::fs::create_dir_all(&dir).unwrap();
     let drive = dir.join("drive.mcap");
     write_drive(&drive);
-    let (player_session, pipeline_session, topics) = loopback_pair("replayed").await.unwrap();
-    let frames: Arc<Mutex<Vec<(Instant, pb::Header)>>> = Arc::default();
-    let infos: Arc<Mutex<Vec<pb::Header>>> = Arc::default();
-    let sink = frames.clone();
-    let _frames_sub = declare_callback_subscriber(
-        &pipeline_session,
-        topics.key("front", Stream::Frame).unwrap(),
-        move |sample| {
-            let frame = pb::ImageFrame::decode(&sample.payload().to_bytes()[..]).unwrap();
-            assert_eq!(
-                frame.to_rgb().unwrap().get_pixel(0, 0)[0] as u64 + 10,
-                frame.header.as_ref().unwrap().frame_sequence
-            );
-            sink.lock()
-                .unwrap()
-                .push((Instant::now(), frame.header.unwrap()));
-        },
-    )
-    .await
-    .unwrap();
-    let info_sink = infos.clone();
-    let _infos_sub = declare_callback_subscriber(
-        &pipeline_session,
-        topics.key("front", Stream::CameraInfo).unwrap(),
-        move |sample| {
-            let info = pb::CameraInfo::decode(&sample.payload().to_bytes()[..]).unwrap();
-            info_sink.lock().unwrap().push(info.header.unwrap());
-        },
-    )
-    .await
-    .unwrap();
-    let options = ReplayOptions {
-        pacing: Pacing::Rate(2.0),
-        wait_for_subscribers: Duration::from_secs(10),
-        settle: Duration::from_millis(200),
-        drain: Duration::ZERO,
-        ..ReplayOptions::default()
-    };
-    let mut player = Player::new(&player_session, &topics, options)
-        .await
-        .unwrap();
-    let cameras = player.prepare(std::slice::from_ref(&drive)).await.unwrap();
-    assert_eq!(cameras, ["front"]);
     let before_ns = now_ns();
-    let summary = player
-        .play(
-            std::slice::from_ref(&drive),
-            Arc::new(ReplayProgress::default()),
-            Arc::new(AtomicBool::new(false)),
-        )
-        .await
-        .unwrap();
-    tokio::time::sleep(Duration::from_millis(300)).await;
+    let replayed = common::replay(std::slice::from_ref(&drive), "replayed", "front", 2.0).await;
+    assert_eq!(replayed.cameras, ["front"]);
+    let summary = &replayed.summary;
     assert_eq!(summary.frames_published, 5);
     // No pipeline answers: every frame is lost, and said so.
     assert_eq!(summary.frames_lost, 5);
@@ -116,11 +66,21 @@ async fn a_recording_is_replayed_into_another_namespace_at_the_given_rate() {
     assert!(summary.truncated_files.is_empty());
     // The first camera info primed before the frames, and the recorded one.
     assert_eq!(summary.camera_info_published, 2);
-    assert_eq!(infos.lock().unwrap().len(), 2);
-    let frames = frames.lock().unwrap();
+    assert_eq!(replayed.camera_infos, 2);
+    let frames: Vec<(Instant, pb::Header)> = replayed
+        .frames
+        .iter()
+        .map(|(at, frame)| {
+            assert_eq!(
+                frame.to_rgb().unwrap().get_pixel(0, 0)[0] as u64 + 10,
+                frame.header.as_ref().unwrap().frame_sequence
+            );
+            (*at, frame.header.clone().unwrap())
+        })
+        .collect();
     let sequences: Vec<u64> = frames.iter().map(|(_, h)| h.frame_sequence).collect();
     assert_eq!(sequences, [10, 11, 12, 13, 14]);
-    for (_, header) in frames.iter() {
+    for (_, header) in &frames {
         assert_eq!(header.camera_id, "front");
         assert!(
             header.acquisition_time_ns >= before_ns,
@@ -190,50 +150,23 @@ async fn broken_jpeg_frames_of_a_recording_are_not_published_and_are_counted() {
     }
     sink.finish().unwrap();
 
-    let (player_session, pipeline_session, topics) = loopback_pair("replayed-jpeg").await.unwrap();
-    let published: Arc<Mutex<Vec<u64>>> = Arc::default();
-    let sink = published.clone();
-    let _frames_sub = declare_callback_subscriber(
-        &pipeline_session,
-        topics.key("front", Stream::Frame).unwrap(),
-        move |sample| {
-            let frame = pb::ImageFrame::decode(&sample.payload().to_bytes()[..]).unwrap();
-            sink.lock()
-                .unwrap()
-                .push(frame.header.unwrap().frame_sequence);
-        },
-    )
-    .await
-    .unwrap();
-    let options = ReplayOptions {
-        pacing: Pacing::Rate(4.0),
-        wait_for_subscribers: Duration::from_secs(10),
-        settle: Duration::from_millis(200),
-        drain: Duration::ZERO,
-        ..ReplayOptions::default()
-    };
-    let mut player = Player::new(&player_session, &topics, options)
-        .await
-        .unwrap();
-    player.prepare(std::slice::from_ref(&drive)).await.unwrap();
-    let progress = Arc::new(ReplayProgress::default());
-    let summary = player
-        .play(
-            std::slice::from_ref(&drive),
-            progress.clone(),
-            Arc::new(AtomicBool::new(false)),
-        )
-        .await
-        .unwrap();
-    tokio::time::sleep(Duration::from_millis(300)).await;
+    let replayed =
+        common::replay(std::slice::from_ref(&drive), "replayed-jpeg", "front", 4.0).await;
+    let summary = &replayed.summary;
     assert_eq!(summary.frames_refused, 3, "{summary:?}");
     assert_eq!(
-        progress
+        replayed
+            .progress
             .frames_refused
             .load(std::sync::atomic::Ordering::Relaxed),
         3
     );
     assert_eq!(summary.frames_published, 3);
-    assert_eq!(*published.lock().unwrap(), [0, 2, 5]);
+    let sequences: Vec<u64> = replayed
+        .frames
+        .iter()
+        .map(|(_, f)| f.header.as_ref().unwrap().frame_sequence)
+        .collect();
+    assert_eq!(sequences, [0, 2, 5]);
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -6,14 +6,12 @@
 //! training/tests/test_ros2_bag.py, replayed through the real services there).
 #![allow(clippy::unwrap_used, clippy::expect_used, missing_docs)]
 
-use std::path::Path;
-use std::sync::atomic::AtomicBool;
-use std::sync::{Arc, Mutex};
-use std::time::Duration;
+mod common;
 
-use conesight_bus::{Stream, declare_callback_subscriber, loopback_pair};
-use conesight_proto::{Message, pb};
-use conesight_replay::{Pacing, Player, ReplayOptions, ReplayProgress, ReplaySummary};
+use std::path::Path;
+
+use conesight_proto::pb;
+use conesight_replay::ReplaySummary;
 use conesight_ros2::bag::BagWriter;
 use conesight_ros2::msg::{CameraInfo, Header, Image, Time};
 
@@ -66,53 +64,15 @@ fn write_bag(dir: &Path, with_info: bool) {
 }
 
 async fn replay(bag: &Path, namespace: &str) -> (ReplaySummary, Vec<pb::ImageFrame>, usize) {
-    let (player_session, pipeline_session, topics) = loopback_pair(namespace).await.unwrap();
-    let frames: Arc<Mutex<Vec<pb::ImageFrame>>> = Arc::default();
-    let infos = Arc::new(Mutex::new(0_usize));
-    let sink = frames.clone();
-    let _frames = declare_callback_subscriber(
-        &pipeline_session,
-        topics.key("cam", Stream::Frame).unwrap(),
-        move |sample| {
-            let frame = pb::ImageFrame::decode(&sample.payload().to_bytes()[..]).unwrap();
-            sink.lock().unwrap().push(frame);
-        },
-    )
-    .await
-    .unwrap();
-    let info_sink = infos.clone();
-    let _infos = declare_callback_subscriber(
-        &pipeline_session,
-        topics.key("cam", Stream::CameraInfo).unwrap(),
-        move |_| *info_sink.lock().unwrap() += 1,
-    )
-    .await
-    .unwrap();
-    let options = ReplayOptions {
-        pacing: Pacing::Rate(4.0),
-        wait_for_subscribers: Duration::from_secs(10),
-        settle: Duration::from_millis(200),
-        drain: Duration::ZERO,
-        ..ReplayOptions::default()
-    };
     let files = conesight_replay::recording_files(&[bag.to_path_buf()]).unwrap();
-    let mut player = Player::new(&player_session, &topics, options)
-        .await
-        .unwrap();
-    let cameras = player.prepare(&files).await.unwrap();
-    assert_eq!(cameras, ["cam"], "the camera is the topic's first name");
-    let summary = player
-        .play(
-            &files,
-            Arc::new(ReplayProgress::default()),
-            Arc::new(AtomicBool::new(false)),
-        )
-        .await
-        .unwrap();
-    tokio::time::sleep(Duration::from_millis(300)).await;
-    let frames = frames.lock().unwrap().clone();
-    let infos = *infos.lock().unwrap();
-    (summary, frames, infos)
+    let replayed = common::replay(&files, namespace, "cam", 4.0).await;
+    assert_eq!(
+        replayed.cameras,
+        ["cam"],
+        "the camera is the topic's first name"
+    );
+    let frames = replayed.frames.into_iter().map(|(_, f)| f).collect();
+    (replayed.summary, frames, replayed.camera_infos)
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

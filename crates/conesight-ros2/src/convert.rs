@@ -200,45 +200,22 @@ pub fn camera_from_ros(info: &CameraInfo) -> Result<Camera, Ros2Error> {
             )));
         }
     };
-    let d = &info.d;
-    let needed = if info.distortion_model.is_empty() && d.is_empty() {
-        0
-    } else {
-        model.coefficient_count()
-    };
-    if d.len() < needed {
-        return Err(bad(format!(
-            "{} distortion coefficients; {} takes {needed}",
-            d.len(),
-            model.ros_name()
-        )));
-    }
     if info.binning_x > 1 || info.binning_y > 1 || info.roi.width > 0 || info.roi.height > 0 {
         return Err(bad(
             "binning or a region of interest: give the full image's calibration".to_owned(),
         ));
     }
-    let at = |i: usize| d.get(i).copied().unwrap_or(0.0);
-    let distortion = match model {
-        DistortionModel::Equidistant => Distortion {
-            k1: at(0),
-            k2: at(1),
-            k3: at(2),
-            k4: at(3),
-            model,
-            ..Distortion::NONE
-        },
-        _ => Distortion {
-            k1: at(0),
-            k2: at(1),
-            p1: at(2),
-            p2: at(3),
-            k3: at(4),
-            k4: at(5),
-            k5: at(6),
-            k6: at(7),
-            model,
-        },
+    let distortion = if info.d.is_empty() {
+        Distortion::NONE
+    } else {
+        Distortion::from_coefficients(model, &info.d).ok_or_else(|| {
+            bad(format!(
+                "{} distortion coefficients do not fit {} (it takes {})",
+                info.d.len(),
+                model.ros_name(),
+                model.coefficient_count()
+            ))
+        })?
     };
     let camera = Camera {
         width_px: info.width,
