@@ -282,3 +282,71 @@ def urllib_get(url: str) -> str:
 
     with urllib.request.urlopen(url, timeout=10) as response:
         return response.read().decode()
+
+
+def test_the_ros2_service_publishes_a_runs_cones_with_health_and_metrics(tmp_path: Path) -> None:
+    """`conesight ros2` as a service of its own beside a run: ConeArray samples on rmw_zenoh's
+    key, its /metrics counting them, its liveliness token among the run's services."""
+    binary = find_binary()
+    if binary is None:
+        pytest.skip("target/*/conesight not built (cargo build -p conesight-cli)")
+    if "ros2" not in subprocess.run([binary, "--help"], capture_output=True, text=True).stdout:
+        pytest.skip("this conesight binary has no `ros2` service (rebuild it)")
+    run_endpoint = f"tcp/127.0.0.1:{free_port()}"
+    ros2_endpoint = f"tcp/127.0.0.1:{free_port()}"
+    namespace = f"pyros2svc{free_port()}"
+    http = free_port()
+    env = {**os.environ, "RUST_LOG": "warn", "ROS_DOMAIN_ID": "0"}
+    run = subprocess.Popen(
+        [
+            *(binary, "run", "--namespace", namespace, "--zenoh-listen", run_endpoint),
+            *("--frames", "0", "--rate-hz", "4", "--preload", "3", "--out", str(tmp_path / "run")),
+        ],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        env=env,
+    )
+    service = subprocess.Popen(
+        [
+            *(binary, "ros2", "--namespace", namespace, "--zenoh-connect", run_endpoint),
+            *("--zenoh-listen", ros2_endpoint, "--http-addr", f"127.0.0.1:{http}"),
+        ],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
+    arrays: list[bytes] = []
+    try:
+        deadline = time.monotonic() + 180
+        session = open_zenoh_peer(ros2_endpoint, deadline)
+        subscriber = session.declare_subscriber(
+            "0/conesight/front/cones/**", lambda sample: arrays.append(sample.payload.to_bytes())
+        )
+        while len(arrays) < 4:
+            assert time.monotonic() < deadline, (run.poll(), service.poll())
+            time.sleep(0.2)
+        subscriber.undeclare()
+        tokens = [
+            str(r.ok.key_expr)
+            for r in session.liveliness().get(f"conesight/{namespace}/car/@service/*/*")
+        ]
+        session.close()
+        metrics = urllib_get(f"http://127.0.0.1:{http}/metrics")
+        health = urllib_get(f"http://127.0.0.1:{http}/livez")
+    finally:
+        service.kill()
+        service.wait()
+        run.kill()
+        run.wait()
+    store = ros2_typestore()
+    cones = sum(len(store.deserialize_cdr(a, "conesight_msgs/msg/ConeArray").cones) for a in arrays)
+    published = [
+        float(line.rsplit(" ", 1)[1])
+        for line in metrics.splitlines()
+        if line.startswith("conesight_frames_processed_total") and 'service="ros2"' in line
+    ]
+    assert published and published[0] >= 4, metrics[:2000]
+    assert any("/@service/ros2/" in t for t in tokens), tokens
+    assert health
+    print(f"ros2 service: {len(arrays)} ConeArray ({cones} cones), {published[0]:.0f} published")

@@ -7,14 +7,12 @@
 //! unset). A message that does not convert is logged (rate-limited) and not published.
 
 use std::collections::{BTreeMap, VecDeque};
-use std::sync::Arc;
-use std::sync::atomic::{AtomicU64, Ordering};
 
 use anyhow::Context;
 use conesight_bus::zenoh::Session;
 use conesight_bus::zenoh::liveliness::LivelinessToken;
 use conesight_bus::{Stream, Topics, declare_subscriber, decode};
-use conesight_pipeline::Shutdown;
+use conesight_pipeline::{Node, Shutdown};
 use conesight_proto::{ConeKeypoints, now_ns, pb};
 use conesight_ros2::msg::{CameraInfo, ConeArray, MarkerArray, RosMessage};
 use conesight_ros2::rmw_zenoh;
@@ -23,15 +21,6 @@ use conesight_ros2::rmw_zenoh;
 const NODE: &str = "conesight";
 /// Keypoints messages kept per camera to give each cone its keypoints.
 const KEYPOINTS_KEPT: usize = 32;
-
-/// Counters of the ROS 2 output.
-#[derive(Debug, Default)]
-pub struct Ros2Stats {
-    /// Samples published.
-    pub published: AtomicU64,
-    /// Bus messages that did not convert (not published).
-    pub refused: AtomicU64,
-}
 
 /// One ROS 2 publisher: its key, GID, sequence and liveliness token.
 struct Publisher {
@@ -47,7 +36,9 @@ struct Output {
     zid: String,
     publishers: BTreeMap<String, Publisher>,
     next_entity: u32,
-    stats: Arc<Ros2Stats>,
+    /// Counts samples published (`conesight_frames_processed_total`) and what was not
+    /// (`conesight_errors_total{kind="ros2_output"}`).
+    node: Node,
 }
 
 impl Output {
@@ -93,18 +84,19 @@ impl Output {
             .attachment(attachment.to_vec())
             .await
             .map_err(|e| anyhow::anyhow!("publishing {}: {e}", publisher.key))?;
-        self.stats.published.fetch_add(1, Ordering::Relaxed);
+        self.node.metrics.frame_processed();
         Ok(())
     }
 }
 
 /// Starts publishing the run's cones and calibration as ROS 2 topics over rmw_zenoh until
-/// `shutdown`; returns the counters.
+/// `shutdown`, counting on `node`.
 pub async fn serve(
     session: &Session,
     topics: &Topics,
+    node: &Node,
     shutdown: &Shutdown,
-) -> anyhow::Result<Arc<Ros2Stats>> {
+) -> anyhow::Result<()> {
     let domain = rmw_zenoh::domain_from_env().map_err(anyhow::Error::msg)?;
     let zid = session.zid().to_string();
     let node_token = session
@@ -127,14 +119,13 @@ pub async fn serve(
         Stream::CameraInfo,
     )
     .await?;
-    let stats = Arc::new(Ros2Stats::default());
     let mut output = Output {
         session: session.clone(),
         domain,
         zid,
         publishers: BTreeMap::new(),
         next_entity: 0,
-        stats: stats.clone(),
+        node: node.clone(),
     };
     let shutdown = shutdown.clone();
     tokio::spawn(async move {
@@ -160,14 +151,50 @@ pub async fn serve(
                 },
             };
             if let Err(error) = result {
-                let refused = output.stats.refused.fetch_add(1, Ordering::Relaxed) + 1;
-                if refused.is_power_of_two() {
-                    tracing::warn!(refused, "ROS 2 output: not published: {error:#}");
-                }
+                output.node.errors.report(
+                    "ros2_output",
+                    &format!("ROS 2 output: not published: {error:#}"),
+                );
             }
         }
     });
-    Ok(stats)
+    Ok(())
+}
+
+/// Arguments of `conesight ros2`.
+#[derive(Debug, clap::Args)]
+pub struct Ros2Args {
+    /// Zenoh session and keys: `--namespace` and `--vehicle` name the run whose cones go out.
+    #[command(flatten)]
+    zenoh: conesight_bus::ZenohArgs,
+    /// Serve /livez, /readyz and /metrics here.
+    #[arg(long = "http-addr", default_value = "127.0.0.1:9094")]
+    http_addr: std::net::SocketAddr,
+}
+
+/// `conesight ros2`: the ROS 2 output as a service of its own on the bus (liveliness token,
+/// health and manifest queries, HTTP health and metrics), until Ctrl-C.
+pub fn run(args: &Ros2Args) -> anyhow::Result<()> {
+    conesight_service::init_tracing();
+    crate::async_runtime()?.block_on(async {
+        let shutdown = Shutdown::new();
+        shutdown.trigger_on_signal();
+        let session = conesight_bus::open_session(&args.zenoh).await?;
+        let topics = Topics::from_args(&args.zenoh)?;
+        let node = Node::new("ros2", "*", session.clone(), topics.clone(), None);
+        let bound = node.serve_http(args.http_addr, &shutdown).await?;
+        let _presence = node.announce().await?;
+        serve(&session, &topics, &node, &shutdown).await?;
+        eprintln!(
+            "ros2: the cones of conesight/{}/** as ROS 2 topics over rmw_zenoh (domain {}); \
+             metrics on http://{bound}/metrics (Ctrl-C stops)",
+            topics.namespace(),
+            rmw_zenoh::domain_from_env().unwrap_or(0)
+        );
+        shutdown.wait().await;
+        let _ = session.close().await;
+        Ok(())
+    })
 }
 
 fn keep_keypoints(

@@ -284,7 +284,8 @@ async fn run_async(args: RunArgs) -> anyhow::Result<()> {
         println!("dashboard: http://{bound}/");
     }
     if args.ros2 == Some(Ros2Output::Zenoh) {
-        crate::ros2_zenoh::serve(&session, &topics, &shutdown).await?;
+        let node = Node::new("ros2", &args.camera, session.clone(), topics.clone(), None);
+        crate::ros2_zenoh::serve(&session, &topics, &node, &shutdown).await?;
         println!(
             "ROS 2: cones and camera info over rmw_zenoh on /conesight/{}/...",
             args.camera
