@@ -224,7 +224,10 @@ impl Cluster {
             .stdin(Stdio::null())
             .stdout(Stdio::null());
         if std::env::var_os("CONESIGHT_E2E_LOGS").is_none() {
-            command.stderr(Stdio::null()).env("RUST_LOG", "warn");
+            // Warnings and errors into a file, so a service that does not come up says why.
+            let log = std::fs::File::create(self.log_path(name))
+                .with_context(|| format!("creating {}", self.log_path(name).display()))?;
+            command.stderr(log).env("RUST_LOG", "warn");
         }
         let child = command
             .spawn()
@@ -235,12 +238,13 @@ impl Cluster {
         Ok(())
     }
 
-    /// Starts an [`Observer`] of `camera`'s cones, then every service, and waits (30 s at
-    /// most) until each answers `/livez`.
+    /// Starts an [`Observer`] of `camera`'s cones, then every service, and waits (60 s at
+    /// most: a service starts in under a second, but once took over 30 s on a 2-core machine
+    /// under a parallel build) until each answers `/livez`.
     pub async fn start_observed(&mut self, camera: &str) -> anyhow::Result<Observer> {
         let observer = Observer::start(&self.observer_args(), camera).await?;
         self.spawn_all()?;
-        self.wait_live(Duration::from_secs(30))?;
+        self.wait_live(Duration::from_secs(60))?;
         Ok(observer)
     }
 
@@ -340,18 +344,48 @@ impl Cluster {
             .unwrap_or(0.0)
     }
 
-    /// Waits until every started service answers `/livez`.
-    pub fn wait_live(&self, timeout: Duration) -> anyhow::Result<()> {
+    /// Where `name`'s warnings and errors go (unless `CONESIGHT_E2E_LOGS` is set).
+    pub fn log_path(&self, name: &str) -> PathBuf {
+        std::env::temp_dir().join(format!("conesight-e2e-{}-{name}.log", self.namespace))
+    }
+
+    /// Waits until every started service answers `/livez`; a service that exited or did not
+    /// answer in time is an error with its exit status and the end of its log.
+    pub fn wait_live(&mut self, timeout: Duration) -> anyhow::Result<()> {
         let deadline = Instant::now() + timeout;
-        for (name, _) in self.members.iter().filter(|(_, m)| m.child.is_some()) {
+        let names: Vec<String> = self
+            .members
+            .iter()
+            .filter(|(_, m)| m.child.is_some())
+            .map(|(name, _)| name.clone())
+            .collect();
+        for name in names {
             loop {
-                if matches!(self.http(name, "/livez"), Ok((200, _))) {
+                if matches!(self.http(&name, "/livez"), Ok((200, _))) {
                     break;
                 }
-                anyhow::ensure!(
-                    Instant::now() < deadline,
-                    "{name} did not come up within {timeout:?}"
-                );
+                let exited = self
+                    .members
+                    .get_mut(&name)
+                    .and_then(|m| m.child.as_mut())
+                    .and_then(|child| child.try_wait().ok().flatten());
+                if exited.is_some() || Instant::now() >= deadline {
+                    let log = std::fs::read_to_string(self.log_path(&name)).unwrap_or_default();
+                    let tail: String = log
+                        .lines()
+                        .rev()
+                        .take(20)
+                        .collect::<Vec<_>>()
+                        .into_iter()
+                        .rev()
+                        .collect::<Vec<_>>()
+                        .join("\n");
+                    anyhow::bail!(
+                        "{name} did not come up within {timeout:?} (exit status: {exited:?}, http \
+                         port {}); its log:\n{tail}",
+                        self.members.get(&name).map_or(0, |m| m.http_port)
+                    );
+                }
                 std::thread::sleep(Duration::from_millis(50));
             }
         }
