@@ -2,6 +2,7 @@
 free ports, a Zenoh peer of our own, and ROS 2 types built by rosbags from the package's .msg
 files."""
 
+import os
 import socket
 import time
 from pathlib import Path
@@ -19,10 +20,26 @@ def find_binary() -> Path | None:
     return None
 
 
+_NEXT_PORT = [None]
+
+
 def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
+    """A port free on 127.0.0.1, below Linux's ephemeral range (as conesight_bus's
+    free_loopback_port): a port from `bind(0)` may be taken by any outgoing connection before
+    the process it is meant for listens on it."""
+    first, count = 20_000, 12_000
+    if _NEXT_PORT[0] is None:
+        _NEXT_PORT[0] = (os.getpid() * 97 + 6_007) % count
+    for _ in range(count):
+        port = first + _NEXT_PORT[0] % count
+        _NEXT_PORT[0] += 1
+        with socket.socket() as sock:
+            try:
+                sock.bind(("127.0.0.1", port))
+            except OSError:
+                continue
+            return port
+    raise OSError("no free port in 20000-31999 on 127.0.0.1")
 
 
 def ros2_typestore():

@@ -47,7 +47,7 @@ pub use qos::{
     publish, publish_payload,
 };
 pub use security::check_enforceable;
-pub use session::{loopback_pair, open_session, shm_pool_bytes, zenoh_config};
+pub use session::{free_loopback_port, loopback_pair, open_session, shm_pool_bytes, zenoh_config};
 pub use topics::{ServiceQuery, Stream, Topics};
 
 /// The Zenoh crate, re-exported so services use the same version.

@@ -122,16 +122,44 @@ fn json_list(values: &[String]) -> String {
     serde_json::Value::from(values.to_vec()).to_string()
 }
 
+/// A TCP port free on 127.0.0.1 for a process (or session) about to listen on it, for tests
+/// and scripts that start services on fixed endpoints. Taken below Linux's ephemeral range
+/// (32768-60999): a port the kernel hands out for `:0` comes from that range, where any
+/// outgoing connection (Zenoh peers dialling each other) may take it before the service binds
+/// it, which made services of the end-to-end tests fail with "address already in use". Each
+/// call in a process gives another port (a counter from an offset of the process id), checked
+/// free by binding it.
+pub fn free_loopback_port() -> std::io::Result<u16> {
+    use std::sync::atomic::{AtomicU32, Ordering};
+    const FIRST: u32 = 20_000;
+    const COUNT: u32 = 12_000;
+    static NEXT: AtomicU32 = AtomicU32::new(u32::MAX);
+    let _ = NEXT.compare_exchange(
+        u32::MAX,
+        (std::process::id().wrapping_mul(97)) % COUNT,
+        Ordering::Relaxed,
+        Ordering::Relaxed,
+    );
+    for _ in 0..COUNT {
+        let offset = NEXT.fetch_add(1, Ordering::Relaxed) % COUNT;
+        let port = u16::try_from(FIRST + offset).unwrap_or(u16::MAX);
+        if std::net::TcpListener::bind(("127.0.0.1", port)).is_ok() {
+            return Ok(port);
+        }
+    }
+    Err(std::io::Error::new(
+        std::io::ErrorKind::AddrInUse,
+        "no free port in 20000-31999 on 127.0.0.1",
+    ))
+}
+
 /// Two peer sessions on 127.0.0.1 in `namespace`, the second connected to the first (both
 /// listen on loopback only), with the namespace's keys: for tests and examples that need a
 /// real bus between two participants.
 pub async fn loopback_pair(namespace: &str) -> Result<(Session, Session, Topics), BusError> {
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .and_then(|listener| listener.local_addr())
-        .map_err(|error| BusError::Open {
-            source: error.into(),
-        })?
-        .port();
+    let port = free_loopback_port().map_err(|error| BusError::Open {
+        source: error.into(),
+    })?;
     let endpoint = format!("tcp/127.0.0.1:{port}");
     let base = ZenohArgs {
         namespace: namespace.to_owned(),

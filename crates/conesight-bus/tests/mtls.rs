@@ -47,11 +47,7 @@ fn certs_and_configs(test: &str) -> Option<PathBuf> {
 }
 
 fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
+    conesight_bus::free_loopback_port().unwrap()
 }
 
 /// The config of `node` from `dir`, on loopback: listening on `listen`, dialling `connect`.

@@ -31,13 +31,9 @@ impl Drop for TempDir {
     }
 }
 
-/// A free TCP port on 127.0.0.1.
+/// A free TCP port on 127.0.0.1, outside the ephemeral range (`conesight_bus::free_loopback_port`).
 pub fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
+    conesight_bus::free_loopback_port().unwrap()
 }
 
 /// A child process killed (SIGKILL) on drop unless it was waited for.

@@ -31,11 +31,9 @@ pub async fn one_cluster_at_a_time() -> tokio::sync::MutexGuard<'static, ()> {
     CLUSTERS.lock().await
 }
 
-/// A free TCP port on 127.0.0.1 (bound and released; good enough for tests).
+/// A free TCP port on 127.0.0.1, outside the ephemeral range (`conesight_bus::free_loopback_port`).
 pub fn free_port() -> anyhow::Result<u16> {
-    Ok(std::net::TcpListener::bind("127.0.0.1:0")?
-        .local_addr()?
-        .port())
+    Ok(conesight_bus::free_loopback_port()?)
 }
 
 /// Rendered frames with exact truth, written as PNGs with KITTI label files and the camera's
