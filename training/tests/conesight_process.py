@@ -108,3 +108,80 @@ def open_zenoh_peer(endpoint: str, deadline: float):
             if time.monotonic() > deadline:
                 raise
             time.sleep(0.5)
+
+
+# Eclipse Cyclone DDS on loopback only (its multicast forced on `lo`), as the tests must.
+CYCLONEDDS_LOOPBACK = (
+    "<CycloneDDS><Domain><General><Interfaces>"
+    '<NetworkInterface name="lo" multicast="true"/>'
+    "</Interfaces></General></Domain></CycloneDDS>"
+)
+
+
+def dds_env(domain: int) -> dict:
+    """The environment of a DDS test on `domain`: Cyclone DDS (ours is the Python peer) and
+    conesight (Dust DDS) both kept on loopback, as ROS 2 nodes are with ROS_LOCALHOST_ONLY."""
+    return {
+        **os.environ,
+        "ROS_DOMAIN_ID": str(domain),
+        "ROS_LOCALHOST_ONLY": "1",
+        "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
+        "CYCLONEDDS_URI": CYCLONEDDS_LOOPBACK,
+    }
+
+
+def cyclone_types(store):
+    """A function from a ROS 2 type name (`sensor_msgs/msg/Image`) to an Eclipse Cyclone DDS
+    IdlStruct named as ROS 2 names it on DDS (`sensor_msgs::msg::dds_::Image_`), built from the
+    field definitions rosbags parsed from the .msg files, so they cannot drift from them."""
+    import dataclasses
+    import types as pytypes
+
+    import cyclonedds.idl.types as idl
+    from cyclonedds.idl import IdlStruct
+    from rosbags.typesys.base import Nodetype
+
+    base = {
+        "bool": bool,
+        "byte": idl.uint8,
+        "char": idl.uint8,
+        "uint8": idl.uint8,
+        "int8": idl.int8,
+        "uint16": idl.uint16,
+        "int16": idl.int16,
+        "uint32": idl.uint32,
+        "int32": idl.int32,
+        "uint64": idl.uint64,
+        "int64": idl.int64,
+        "float32": idl.float32,
+        "float64": idl.float64,
+        "string": str,
+    }
+    made: dict = {}
+
+    def field_type(desc):
+        kind, rest = desc
+        if kind == Nodetype.BASE:
+            return base[rest[0]]
+        if kind == Nodetype.NAME:
+            return make(rest)
+        inner, size = rest
+        if kind == Nodetype.ARRAY:
+            return idl.array[field_type(inner), size]
+        return idl.sequence[field_type(inner), size] if size else idl.sequence[field_type(inner)]
+
+    def make(name: str):
+        if name not in made:
+            package, _, short = name.split("/")
+            _, fields = store.fielddefs[name]
+            annotations = {field: field_type(desc) for field, desc in fields}
+            cls = pytypes.new_class(
+                short,
+                (IdlStruct,),
+                {"typename": f"{package}::msg::dds_::{short}_"},
+                lambda ns, annotations=annotations: ns.update({"__annotations__": annotations}),
+            )
+            made[name] = dataclasses.dataclass(cls)
+        return made[name]
+
+    return make

@@ -181,7 +181,12 @@ def test_a_ros2_camera_topic_over_rmw_zenoh_gives_cones(tmp_path: Path) -> None:
 
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     http = free_port()
-    env = {**os.environ, "RUST_LOG": "warn", "ROS_DOMAIN_ID": "0"}
+    env = {
+        **os.environ,
+        "RUST_LOG": "warn",
+        "ROS_DOMAIN_ID": "0",
+        "RMW_IMPLEMENTATION": "rmw_zenoh_cpp",
+    }
     run = subprocess.Popen(
         [
             *(binary, "run", "--source", "ros2:/cam/image_raw", "--camera", "cam"),
@@ -296,7 +301,12 @@ def test_the_ros2_service_publishes_a_runs_cones_with_health_and_metrics(tmp_pat
     ros2_endpoint = f"tcp/127.0.0.1:{free_port()}"
     namespace = f"pyros2svc{free_port()}"
     http = free_port()
-    env = {**os.environ, "RUST_LOG": "warn", "ROS_DOMAIN_ID": "0"}
+    env = {
+        **os.environ,
+        "RUST_LOG": "warn",
+        "ROS_DOMAIN_ID": "0",
+        "RMW_IMPLEMENTATION": "rmw_zenoh_cpp",
+    }
     run = subprocess.Popen(
         [
             *(binary, "run", "--namespace", namespace, "--zenoh-listen", run_endpoint),
@@ -308,7 +318,8 @@ def test_the_ros2_service_publishes_a_runs_cones_with_health_and_metrics(tmp_pat
     )
     service = subprocess.Popen(
         [
-            *(binary, "ros2", "--namespace", namespace, "--zenoh-connect", run_endpoint),
+            *(binary, "ros2", "--rmw", "zenoh", "--namespace", namespace),
+            *("--zenoh-connect", run_endpoint),
             *("--zenoh-listen", ros2_endpoint, "--http-addr", f"127.0.0.1:{http}"),
         ],
         stdout=subprocess.DEVNULL,

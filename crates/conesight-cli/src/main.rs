@@ -39,7 +39,7 @@ mod mount_cmd;
 mod predict;
 mod record_cmd;
 mod replay_cmd;
-mod ros2_zenoh;
+mod ros2_out;
 mod run;
 mod run_monitor;
 mod run_table;
@@ -92,7 +92,7 @@ enum Command {
     Echo(echo_cmd::EchoArgs),
     /// The cones of a run as ROS 2 topics over rmw_zenoh (ConeArray, MarkerArray, CameraInfo
     /// on /conesight/<camera>/...), a service with health and metrics like the others.
-    Ros2(ros2_zenoh::Ros2Args),
+    Ros2(ros2_out::Ros2Args),
     /// A web page of a run: live bird's-eye map of the cones, the annotated frame, rates,
     /// latency and the services' health (http://127.0.0.1:8080/ by default).
     Dashboard(dashboard::DashboardArgs),
@@ -154,7 +154,7 @@ fn main() -> anyhow::Result<std::process::ExitCode> {
     let cli = Cli::parse();
     match cli.command {
         Command::Run(args) => run::run(*args)?,
-        Command::Ros2(args) => ros2_zenoh::run(&args)?,
+        Command::Ros2(args) => ros2_out::run(&args)?,
         Command::Predict(args) => predict::run(&args)?,
         Command::Keypoints(args) => keypoints_cmd::run(&args)?,
         Command::Mount(args) => mount_cmd::run(&args)?,

@@ -145,12 +145,17 @@ pub struct RunArgs {
     /// `conesight foxglove --foxglove-addr` does (`--foxglove` still works).
     #[arg(long = "foxglove-addr", alias = "foxglove")]
     foxglove_addr: Option<std::net::SocketAddr>,
-    /// Publish the cones and the calibration as ROS 2 topics too: `zenoh` on this run's Zenoh
-    /// session in rmw_zenoh's format (Jazzy; `ROS_DOMAIN_ID`), `/conesight/<camera>/cones`
-    /// (conesight_msgs/msg/ConeArray) and `/conesight/<camera>/camera_info`. DDS is not built
-    /// yet.
+    /// Publish the cones, RViz markers and the calibration as ROS 2 topics too
+    /// (`/conesight/<camera>/{cones,cone_markers,camera_info}`, `ROS_DOMAIN_ID`): `dds` over DDS
+    /// (as nodes on Cyclone DDS or Fast DDS read them), `zenoh` on this run's Zenoh session in
+    /// rmw_zenoh's format (Jazzy).
     #[arg(long, value_enum)]
-    ros2: Option<Ros2Output>,
+    ros2: Option<crate::ros2_out::Rmw>,
+    /// DDS only (`--ros2 dds`, `--source ros2:` over DDS): the network interface to use (e.g.
+    /// `eth0`). Default: `lo` under `ROS_LOCALHOST_ONLY=1` or
+    /// `ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`, else every interface.
+    #[arg(long = "dds-interface")]
+    dds_interface: Option<String>,
     /// Output folder of the annotated frames and bird's-eye views (`frame_NNNN.png`,
     /// `frame_NNNN_bev.png`), whatever the source.
     #[arg(long, default_value = "out/run")]
@@ -162,13 +167,6 @@ pub struct RunArgs {
     /// drawn there), else stderr.
     #[arg(long = "log-file")]
     log_file: Option<PathBuf>,
-}
-
-/// Where `--ros2` publishes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum Ros2Output {
-    /// rmw_zenoh's key expressions, attachments and liveliness tokens on this run's session.
-    Zenoh,
 }
 
 fn parse_source(text: &str) -> Result<SourceSpec, String> {
@@ -259,6 +257,7 @@ async fn run_async(args: RunArgs) -> anyhow::Result<()> {
     camera_args.frames = args.frames;
     camera_args.publish_boxes = !use_detector;
     camera_args.source = args.source.clone();
+    camera_args.dds_interface = args.dds_interface.clone();
     camera_args.camera_info = args.camera_info.clone();
     camera_args.extrinsics = args.extrinsics.clone();
     camera_args.source_loop = args.source_loop;
@@ -283,12 +282,17 @@ async fn run_async(args: RunArgs) -> anyhow::Result<()> {
         let bound = crate::dashboard::serve(&session, &topics, addr, &shutdown).await?;
         println!("dashboard: http://{bound}/");
     }
-    if args.ros2 == Some(Ros2Output::Zenoh) {
+    if let Some(rmw) = args.ros2 {
         let node = Node::new("ros2", &args.camera, session.clone(), topics.clone(), None);
-        crate::ros2_zenoh::serve(&session, &topics, &node, &shutdown).await?;
+        let settings = crate::ros2_out::Ros2Settings {
+            rmw,
+            dds_interface: args.dds_interface.clone(),
+        };
+        crate::ros2_out::serve(&session, &topics, &settings, &node, &shutdown).await?;
         println!(
-            "ROS 2: cones and camera info over rmw_zenoh on /conesight/{}/...",
-            args.camera
+            "ROS 2: cones, markers and camera info on /conesight/{}/... {}",
+            args.camera,
+            crate::ros2_out::describe(&settings)
         );
     }
     if let Some(addr) = args.foxglove_addr {

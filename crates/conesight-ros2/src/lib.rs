@@ -6,6 +6,8 @@
 //!   (`sensor_msgs/{Image, CompressedImage, CameraInfo}`).
 //! - [`cdr`]: their CDR payloads, as ROS 2 puts them on the wire and in bags.
 //! - [`convert`]: from and to the bus's protobuf messages.
+//! - [`dds`]: the topics over DDS (Dust DDS), as ROS 2 nodes on Cyclone DDS or Fast DDS see
+//!   them.
 //! - [`bag`]: rosbag2 bags in MCAP (the `ros2` profile: `ros2msg` schemas, `cdr` messages,
 //!   `metadata.yaml` beside), written by `conesight record --ros2` and read by `conesight
 //!   replay`.
@@ -13,10 +15,47 @@
 pub mod bag;
 pub mod cdr;
 pub mod convert;
+pub mod dds;
 pub mod msg;
 pub mod rmw_zenoh;
 
 pub use cdr::{from_cdr, to_cdr};
+
+/// The ROS 2 middleware a camera topic is read from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Rmw {
+    /// DDS (RTPS over UDP): rmw_cyclonedds_cpp, rmw_fastrtps_cpp, rmw_connextdds.
+    Dds,
+    /// rmw_zenoh_cpp.
+    Zenoh,
+}
+
+impl Rmw {
+    /// As ROS 2 picks it: `RMW_IMPLEMENTATION=rmw_zenoh_cpp` is Zenoh; unset or a DDS one is
+    /// DDS; anything else is refused, named.
+    pub fn from_env() -> Result<Self, Ros2Error> {
+        let value = std::env::var("RMW_IMPLEMENTATION").unwrap_or_default();
+        Self::parse(&value)
+    }
+
+    fn parse(value: &str) -> Result<Self, Ros2Error> {
+        match value.trim() {
+            "rmw_zenoh_cpp" => Ok(Self::Zenoh),
+            ""
+            | "rmw_cyclonedds_cpp"
+            | "rmw_fastrtps_cpp"
+            | "rmw_fastrtps_dynamic_cpp"
+            | "rmw_connextdds" => Ok(Self::Dds),
+            other => Err(Ros2Error::Invalid {
+                type_name: "RMW_IMPLEMENTATION",
+                reason: format!(
+                    "`{other}` is not one conesight speaks: use rmw_zenoh_cpp, or \
+                     rmw_cyclonedds_cpp / rmw_fastrtps_cpp (DDS), or leave it unset (DDS)"
+                ),
+            }),
+        }
+    }
+}
 
 /// What can go wrong between conesight and ROS 2.
 #[derive(Debug, thiserror::Error)]
@@ -56,5 +95,19 @@ impl Ros2Error {
             Self::Invalid { .. } => "ros2_invalid",
             Self::Bag { .. } => "ros2_bag",
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_middleware_follows_rmw_implementation() {
+        assert_eq!(Rmw::parse("").unwrap(), Rmw::Dds);
+        assert_eq!(Rmw::parse("rmw_cyclonedds_cpp").unwrap(), Rmw::Dds);
+        assert_eq!(Rmw::parse("rmw_zenoh_cpp").unwrap(), Rmw::Zenoh);
+        let error = Rmw::parse("rmw_iceoryx_cpp").unwrap_err().to_string();
+        assert!(error.contains("rmw_iceoryx_cpp") && error.contains("rmw_zenoh_cpp"));
     }
 }

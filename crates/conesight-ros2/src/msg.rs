@@ -7,6 +7,7 @@
 //! time, so the package a team builds with colcon and the bytes written here cannot drift
 //! (the Python tests decode our CDR with types that rosbags builds from those same files).
 
+use dust_dds::infrastructure::type_support::DdsType;
 use serde::{Deserialize, Serialize};
 
 /// A ROS 2 message type: its name and its definition with its dependencies.
@@ -65,7 +66,7 @@ pub(crate) fn normalised_fields(type_name: &str, fields: &str) -> String {
 }
 
 /// `builtin_interfaces/msg/Time`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, DdsType)]
 pub struct Time {
     /// Seconds since the Unix epoch.
     pub sec: i32,
@@ -92,7 +93,7 @@ impl Time {
 }
 
 /// `std_msgs/msg/Header`.
-#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize, DdsType)]
 pub struct Header {
     /// Acquisition time.
     pub stamp: Time,
@@ -110,7 +111,7 @@ fn header_dependencies() -> Vec<(&'static str, &'static str)> {
 }
 
 /// `geometry_msgs/msg/Point`.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize, DdsType)]
 pub struct Point {
     /// Metres.
     pub x: f64,
@@ -123,7 +124,7 @@ pub struct Point {
 const POINT_FIELDS: &str = "float64 x\nfloat64 y\nfloat64 z\n";
 
 /// `sensor_msgs/msg/Image`.
-#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize, DdsType)]
 pub struct Image {
     /// Acquisition time and the camera's optical frame.
     pub header: Header,
@@ -151,7 +152,7 @@ impl RosMessage for Image {
 }
 
 /// `sensor_msgs/msg/CompressedImage`.
-#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize, DdsType)]
 pub struct CompressedImage {
     /// Acquisition time and the camera's optical frame.
     pub header: Header,
@@ -171,7 +172,7 @@ impl RosMessage for CompressedImage {
 }
 
 /// `sensor_msgs/msg/RegionOfInterest`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, DdsType)]
 pub struct RegionOfInterest {
     /// Left column.
     pub x_offset: u32,
@@ -226,7 +227,7 @@ impl RosMessage for CameraInfo {
 }
 
 /// `conesight_msgs/msg/Keypoint` (`ros2/conesight_msgs/msg/Keypoint.msg`).
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize, DdsType)]
 pub struct Keypoint {
     /// Column, pixels, raw image.
     pub u_px: f64,
@@ -377,7 +378,7 @@ mod tests {
 }
 
 /// `geometry_msgs/msg/Quaternion`.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize, DdsType)]
 pub struct Quaternion {
     /// Vector part x.
     pub x: f64,
@@ -390,7 +391,7 @@ pub struct Quaternion {
 }
 
 /// `geometry_msgs/msg/Pose`.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize, DdsType)]
 pub struct Pose {
     /// Position, metres.
     pub position: Point,
@@ -399,7 +400,7 @@ pub struct Pose {
 }
 
 /// `geometry_msgs/msg/Vector3`.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize, DdsType)]
 pub struct Vector3 {
     /// x.
     pub x: f64,
@@ -410,7 +411,7 @@ pub struct Vector3 {
 }
 
 /// `std_msgs/msg/ColorRGBA`.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize, DdsType)]
 pub struct ColorRgba {
     /// Red, 0..1.
     pub r: f32,
@@ -423,7 +424,7 @@ pub struct ColorRgba {
 }
 
 /// `builtin_interfaces/msg/Duration`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, DdsType)]
 pub struct Duration {
     /// Seconds.
     pub sec: i32,
@@ -432,7 +433,7 @@ pub struct Duration {
 }
 
 /// `visualization_msgs/msg/UVCoordinate`.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize, DdsType)]
 pub struct UvCoordinate {
     /// u.
     pub u: f32,
@@ -441,7 +442,7 @@ pub struct UvCoordinate {
 }
 
 /// `visualization_msgs/msg/MeshFile`.
-#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize, DdsType)]
 pub struct MeshFile {
     /// The mesh's file name.
     pub filename: String,
@@ -451,7 +452,7 @@ pub struct MeshFile {
 }
 
 /// `visualization_msgs/msg/Marker` (the same fields in Humble and Jazzy).
-#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize, DdsType)]
 pub struct Marker {
     /// Stamp and frame.
     pub header: Header,
@@ -508,7 +509,7 @@ pub mod marker_type {
 const MARKER_FIELDS: &str = "int32 ARROW=0\nint32 CUBE=1\nint32 SPHERE=2\nint32 CYLINDER=3\nint32 LINE_STRIP=4\nint32 LINE_LIST=5\nint32 CUBE_LIST=6\nint32 SPHERE_LIST=7\nint32 POINTS=8\nint32 TEXT_VIEW_FACING=9\nint32 MESH_RESOURCE=10\nint32 TRIANGLE_LIST=11\nint32 ARROW_STRIP=12\nint32 ADD=0\nint32 MODIFY=0\nint32 DELETE=2\nint32 DELETEALL=3\nstd_msgs/Header header\nstring ns\nint32 id\nint32 type\nint32 action\ngeometry_msgs/Pose pose\ngeometry_msgs/Vector3 scale\nstd_msgs/ColorRGBA color\nbuiltin_interfaces/Duration lifetime\nbool frame_locked\ngeometry_msgs/Point[] points\nstd_msgs/ColorRGBA[] colors\nstring texture_resource\nsensor_msgs/CompressedImage texture\nvisualization_msgs/UVCoordinate[] uv_coordinates\nstring text\nstring mesh_resource\nvisualization_msgs/MeshFile mesh_file\nbool mesh_use_embedded_materials\n";
 
 /// `visualization_msgs/msg/MarkerArray`.
-#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize, DdsType)]
 pub struct MarkerArray {
     /// The markers.
     pub markers: Vec<Marker>,

@@ -15,10 +15,10 @@ use tracing_subscriber::util::SubscriberInitExt;
 
 use crate::refusals::{RefusalCounter, is_refusal_event};
 
-/// Filter used when `RUST_LOG` is unset or invalid: our crates at info, ONNX Runtime and
-/// Zenoh only from warn (their info lines drown the services' own).
-pub(crate) const DEFAULT_LOG_FILTER: &str =
-    "info,ort=warn,zenoh=warn,zenoh_transport=warn,zenoh_link_tcp=warn,zenoh_shm=warn";
+/// Filter used when `RUST_LOG` is unset or invalid: our crates at info, ONNX Runtime, Zenoh
+/// and Dust DDS only from warn (their info lines drown the services' own).
+pub(crate) const DEFAULT_LOG_FILTER: &str = "info,ort=warn,zenoh=warn,zenoh_transport=warn,\
+     zenoh_link_tcp=warn,zenoh_shm=warn,dust_dds=warn";
 
 /// Installs the one formatting subscriber of the process on `writer`, filtered by `RUST_LOG`
 /// (default [`DEFAULT_LOG_FILTER`]). A second call does nothing (tests may call it from many
@@ -27,8 +27,14 @@ fn install<W>(writer: W, ansi: bool)
 where
     W: for<'w> tracing_subscriber::fmt::MakeWriter<'w> + Send + Sync + 'static,
 {
-    let filter =
+    let mut filter =
         EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new(DEFAULT_LOG_FILTER));
+    // Dust DDS logs every sample's bytes at info: kept to warn unless RUST_LOG names it.
+    if !std::env::var("RUST_LOG").is_ok_and(|v| v.contains("dust_dds"))
+        && let Ok(directive) = "dust_dds=warn".parse()
+    {
+        filter = filter.add_directive(directive);
+    }
     let logs = tracing_subscriber::fmt::layer()
         .with_target(true)
         .with_ansi(ansi)

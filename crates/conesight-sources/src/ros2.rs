@@ -1,12 +1,18 @@
-//! [`Ros2Frames`]: `--source ros2:/cam/image_raw`, a ROS 2 camera topic over rmw_zenoh (the
-//! camera driver's node runs `RMW_IMPLEMENTATION=rmw_zenoh_cpp`, Jazzy).
+//! [`Ros2Frames`]: `--source ros2:/cam/image_raw`, a ROS 2 camera topic, over DDS or over
+//! rmw_zenoh as `RMW_IMPLEMENTATION` says ([`conesight_ros2::Rmw`]).
 //!
-//! Subscribes on the camera service's Zenoh session (or, alone, on one of its own with the
-//! service's `--zenoh-*` settings) to
-//! `<ROS_DOMAIN_ID>/<topic>/sensor_msgs::msg::dds_::Image_/*` (or `CompressedImage_` for a topic
-//! ending in `/compressed`: JPEG) and to the `CameraInfo` of the topic's namespace
-//! (`/cam/camera_info` for `/cam/image_raw`). Frames are the newest image (a slow pipeline
-//! skips to it), stamped with the message's header stamp. Their calibration is the latest
+//! Subscribes to `sensor_msgs/msg/Image` on the topic (or `CompressedImage` for a topic ending
+//! in `/compressed`: JPEG) and to the `CameraInfo` of the topic's namespace (`/cam/camera_info`
+//! for `/cam/image_raw`):
+//! - over DDS ([`conesight_ros2::dds`]): `rt/cam/image_raw` in domain `ROS_DOMAIN_ID`, by a
+//!   reliable and a best-effort reader (so a driver's reliable or best-effort publisher
+//!   matches), on `--dds-interface` or as `ROS_LOCALHOST_ONLY` /
+//!   `ROS_AUTOMATIC_DISCOVERY_RANGE` say; a sample Dust DDS cannot decode as its type is dropped
+//!   there, uncounted;
+//! - over rmw_zenoh (Jazzy): on the camera service's Zenoh session (or, alone, on one of its own
+//!   with the service's `--zenoh-*` settings), `<ROS_DOMAIN_ID>/<topic>/<type>/*`.
+//!
+//! Frames are the newest image (a slow pipeline skips to it), stamped with the message's header stamp. Their calibration is the latest
 //! `CameraInfo`, or `--camera-info` when given (then the topic's is not needed); the mount is
 //! `--extrinsics`. An image that does not convert (another encoding, a `step` shorter than a
 //! row, a truncated CDR, an implausible `CameraInfo`) or that comes before any `CameraInfo` is
@@ -19,6 +25,7 @@ use std::time::{Duration, Instant};
 use conesight_bus::zenoh::{self, Wait};
 use conesight_core::{Camera, Extrinsics};
 use conesight_pipeline::SourceFrame;
+use conesight_ros2::Rmw;
 use conesight_ros2::msg::{CameraInfo, CompressedImage, Image};
 
 use crate::{Calibration, CameraFrame, FrameSource, Next, Pacing, SourceError};
@@ -30,16 +37,27 @@ pub struct Ros2Params {
     pub zenoh: conesight_bus::ZenohArgs,
     /// `ROS_DOMAIN_ID`.
     pub domain: u32,
+    /// DDS or rmw_zenoh.
+    pub rmw: Rmw,
+    /// DDS only: the interface to use (`None`: every interface).
+    pub dds_interface: Option<String>,
     /// `--camera-info` (with `--extrinsics`), which replaces the topic's `CameraInfo`.
     pub calibration: Option<Calibration>,
     /// `--extrinsics` (or the default mount) for frames calibrated by the topic's `CameraInfo`.
     pub extrinsics: Extrinsics,
 }
 
+/// An image as it came: CDR from rmw_zenoh, decoded from DDS.
+enum Received {
+    Cdr(Vec<u8>),
+    Image(Image),
+    Compressed(CompressedImage),
+}
+
 #[derive(Default)]
 struct Shared {
-    /// The newest image's payload.
-    image: Option<Vec<u8>>,
+    /// The newest image.
+    image: Option<Received>,
     /// The latest `CameraInfo`, converted.
     camera: Option<Camera>,
     /// Messages that did not convert since the last look.
@@ -57,6 +75,8 @@ pub struct Ros2Frames {
     /// The service's session (not closed here) instead of one of its own.
     shared_session: Option<zenoh::Session>,
     subscribers: Vec<zenoh::pubsub::Subscriber<()>>,
+    /// The DDS participant (with `Rmw::Dds`).
+    dds: Option<conesight_ros2::dds::Dds>,
     shared: Arc<(Mutex<Shared>, Condvar)>,
     index: u64,
     skipped: Vec<SourceError>,
@@ -89,6 +109,7 @@ impl Ros2Frames {
             session: None,
             shared_session: None,
             subscribers: Vec::new(),
+            dds: None,
             shared: Arc::default(),
             index: 0,
             skipped: Vec::new(),
@@ -120,27 +141,36 @@ impl Ros2Frames {
         }
     }
 
-    /// The frame of an image payload with `camera`.
-    fn frame(&mut self, payload: &[u8], camera: Camera) -> Result<CameraFrame, SourceError> {
+    /// The frame of a received image with `camera`.
+    fn frame(&mut self, received: Received, camera: Camera) -> Result<CameraFrame, SourceError> {
         let bad = |reason: String| SourceError::BadFrame {
             source_name: self.name.clone(),
             reason,
         };
-        let (image, stamp) = if self.compressed {
-            let message: CompressedImage =
-                conesight_ros2::from_cdr(payload).map_err(|e| bad(e.to_string()))?;
-            let image = conesight_vision::decode_rgb(
-                &message.data,
-                conesight_vision::DecodeLimits::default(),
-            )
-            .map_err(|e| bad(format!("sensor_msgs/msg/CompressedImage: {e}")))?;
-            (image, message.header.stamp)
-        } else {
-            let message: Image =
-                conesight_ros2::from_cdr(payload).map_err(|e| bad(e.to_string()))?;
-            let image = conesight_ros2::convert::rgb_from_image(&message)
-                .map_err(|e| bad(e.to_string()))?;
-            (image, message.header.stamp)
+        let received = match received {
+            Received::Cdr(payload) if self.compressed => Received::Compressed(
+                conesight_ros2::from_cdr(&payload).map_err(|e| bad(e.to_string()))?,
+            ),
+            Received::Cdr(payload) => {
+                Received::Image(conesight_ros2::from_cdr(&payload).map_err(|e| bad(e.to_string()))?)
+            }
+            decoded => decoded,
+        };
+        let (image, stamp) = match received {
+            Received::Compressed(message) => {
+                let image = conesight_vision::decode_rgb(
+                    &message.data,
+                    conesight_vision::DecodeLimits::default(),
+                )
+                .map_err(|e| bad(format!("sensor_msgs/msg/CompressedImage: {e}")))?;
+                (image, message.header.stamp)
+            }
+            Received::Image(message) => {
+                let image = conesight_ros2::convert::rgb_from_image(&message)
+                    .map_err(|e| bad(e.to_string()))?;
+                (image, message.header.stamp)
+            }
+            Received::Cdr(_) => unreachable!("decoded above"),
         };
         let (camera, extrinsics) = match self.params.calibration {
             Some(calibration) => (calibration.camera, calibration.extrinsics),
@@ -187,6 +217,97 @@ impl FrameSource for Ros2Frames {
     }
 
     fn start(&mut self) -> Result<(), SourceError> {
+        match self.params.rmw {
+            Rmw::Dds => self.start_dds(),
+            Rmw::Zenoh => self.start_zenoh(),
+        }
+    }
+
+    fn next_frame(&mut self, timeout: Duration) -> Result<Next, SourceError> {
+        self.next(timeout)
+    }
+
+    fn stop(&mut self) {
+        self.subscribers.clear();
+        if let Some(session) = self.session.take() {
+            let _ = session.close().wait();
+        }
+    }
+
+    fn take_skipped(&mut self) -> Vec<SourceError> {
+        std::mem::take(&mut self.skipped)
+    }
+
+    fn use_session(&mut self, session: &zenoh::Session) {
+        self.shared_session = Some(session.clone());
+    }
+}
+
+/// Keeps `received` as the newest image and wakes the reader.
+fn keep_image(shared: &(Mutex<Shared>, Condvar), received: Received) {
+    let (lock, ready) = shared;
+    let mut state = lock.lock().unwrap_or_else(PoisonError::into_inner);
+    state.image = Some(received);
+    state.images_received += 1;
+    ready.notify_one();
+}
+
+/// Keeps a converted `CameraInfo`, or its error.
+fn keep_camera_info(
+    shared: &(Mutex<Shared>, Condvar),
+    name: &str,
+    converted: Result<Camera, conesight_ros2::Ros2Error>,
+) {
+    let (lock, _) = shared;
+    let mut state = lock.lock().unwrap_or_else(PoisonError::into_inner);
+    match converted {
+        Ok(camera) => state.camera = Some(camera),
+        Err(error) => state.errors.push(SourceError::BadFrame {
+            source_name: name.to_owned(),
+            reason: error.to_string(),
+        }),
+    }
+}
+
+impl Ros2Frames {
+    fn start_dds(&mut self) -> Result<(), SourceError> {
+        use conesight_ros2::dds::block_on;
+        // A restart (after a stall) keeps the participant and its readers: a new one would
+        // only have to be discovered again, and Dust DDS keeps a dropped one's sockets.
+        if self.dds.is_some() {
+            return Ok(());
+        }
+        let dds = block_on(conesight_ros2::dds::open(
+            self.params.domain,
+            self.params.dds_interface.as_deref(),
+        ))
+        .map_err(|e| self.failed(e.to_string()))?;
+        let shared = self.shared.clone();
+        let subscribed = if self.compressed {
+            block_on(dds.subscribe(&self.topic, move |m: CompressedImage| {
+                keep_image(&shared, Received::Compressed(m));
+            }))
+        } else {
+            block_on(dds.subscribe(&self.topic, move |m: Image| {
+                keep_image(&shared, Received::Image(m));
+            }))
+        };
+        subscribed.map_err(|e| self.failed(e.to_string()))?;
+        let shared = self.shared.clone();
+        let name = self.name.clone();
+        block_on(dds.subscribe(&self.info_topic(), move |info: CameraInfo| {
+            keep_camera_info(
+                &shared,
+                &name,
+                conesight_ros2::convert::camera_from_ros(&info),
+            );
+        }))
+        .map_err(|e| self.failed(e.to_string()))?;
+        self.dds = Some(dds);
+        Ok(())
+    }
+
+    fn start_zenoh(&mut self) -> Result<(), SourceError> {
         let session = match &self.shared_session {
             Some(session) => session.clone(),
             None => {
@@ -208,11 +329,10 @@ impl FrameSource for Ros2Frames {
         let images = session
             .declare_subscriber(self.key(&self.topic, image_type))
             .callback(move |sample| {
-                let (lock, ready) = &*shared;
-                let mut state = lock.lock().unwrap_or_else(PoisonError::into_inner);
-                state.image = Some(sample.payload().to_bytes().into_owned());
-                state.images_received += 1;
-                ready.notify_one();
+                keep_image(
+                    &shared,
+                    Received::Cdr(sample.payload().to_bytes().into_owned()),
+                );
             })
             .wait()
             .map_err(|e| self.failed(format!("subscribing to {}: {e}", self.topic)))?;
@@ -225,15 +345,7 @@ impl FrameSource for Ros2Frames {
                 let converted =
                     conesight_ros2::from_cdr::<CameraInfo>(&sample.payload().to_bytes())
                         .and_then(|info| conesight_ros2::convert::camera_from_ros(&info));
-                let (lock, _) = &*shared;
-                let mut state = lock.lock().unwrap_or_else(PoisonError::into_inner);
-                match converted {
-                    Ok(camera) => state.camera = Some(camera),
-                    Err(error) => state.errors.push(SourceError::BadFrame {
-                        source_name: name.clone(),
-                        reason: error.to_string(),
-                    }),
-                }
+                keep_camera_info(&shared, &name, converted);
             })
             .wait()
             .map_err(|e| self.failed(format!("subscribing to {info_topic}: {e}")))?;
@@ -241,7 +353,7 @@ impl FrameSource for Ros2Frames {
         Ok(())
     }
 
-    fn next_frame(&mut self, timeout: Duration) -> Result<Next, SourceError> {
+    fn next(&mut self, timeout: Duration) -> Result<Next, SourceError> {
         let (payload, camera, errors) = {
             let (lock, ready) = &*self.shared;
             let mut state = lock.lock().unwrap_or_else(PoisonError::into_inner);
@@ -279,28 +391,13 @@ impl FrameSource for Ros2Frames {
             }
             return Ok(Next::Pending);
         };
-        match self.frame(&payload, camera) {
+        match self.frame(payload, camera) {
             Ok(frame) => Ok(Next::Frame(Box::new(frame))),
             Err(error) => {
                 self.skipped.push(error);
                 Ok(Next::Pending)
             }
         }
-    }
-
-    fn stop(&mut self) {
-        self.subscribers.clear();
-        if let Some(session) = self.session.take() {
-            let _ = session.close().wait();
-        }
-    }
-
-    fn take_skipped(&mut self) -> Vec<SourceError> {
-        std::mem::take(&mut self.skipped)
-    }
-
-    fn use_session(&mut self, session: &zenoh::Session) {
-        self.shared_session = Some(session.clone());
     }
 }
 
@@ -314,6 +411,8 @@ mod tests {
             Ros2Params {
                 zenoh: conesight_bus::ZenohArgs::default(),
                 domain: 3,
+                rmw: Rmw::Zenoh,
+                dds_interface: None,
                 calibration: None,
                 extrinsics: Extrinsics::paper_default(),
             },

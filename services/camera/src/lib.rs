@@ -77,7 +77,8 @@ pub struct CameraArgs {
     /// Frame source: `synthetic`, `folder:DIR` (or `folder` with `--images`), `video:PATH`,
     /// `gst:PIPELINE` (a GStreamer pipeline without its sink, e.g. `gst:v4l2src
     /// device=/dev/video0 ! video/x-raw,width=1920,height=1080`) or `ros2:TOPIC` (a ROS 2
-    /// image topic over rmw_zenoh on this service's Zenoh settings and `ROS_DOMAIN_ID`).
+    /// image topic on `ROS_DOMAIN_ID`: over DDS, or over rmw_zenoh on this service's Zenoh
+    /// settings when `RMW_IMPLEMENTATION=rmw_zenoh_cpp`).
     #[arg(long, env = "CONESIGHT_SOURCE", default_value = "synthetic", value_parser = parse_source)]
     pub source: SourceSpec,
     /// Image folder (with `--source folder`).
@@ -122,6 +123,11 @@ pub struct CameraArgs {
     /// folder are decoded again on every loop, so memory stays bounded whatever its size.
     #[arg(long = "cache-mb", env = "CONESIGHT_CACHE_MB", default_value_t = DEFAULT_CACHE_MB)]
     pub cache_mb: usize,
+    /// `--source ros2:` over DDS: the network interface to use (e.g. `eth0`). Default: `lo`
+    /// under `ROS_LOCALHOST_ONLY=1` or `ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`, else every
+    /// interface.
+    #[arg(long = "dds-interface")]
+    pub dds_interface: Option<String>,
     /// Frames per second of synthetic and folder sources (GStreamer sources go at their own
     /// rate); 0 publishes as fast as the pipeline takes them.
     #[arg(long = "rate-hz", env = "CONESIGHT_RATE_HZ", default_value_t = 10.0)]
@@ -161,6 +167,7 @@ impl CameraArgs {
             no_effects: false,
             preload: 20,
             cache_mb: DEFAULT_CACHE_MB,
+            dds_interface: None,
             rate_hz: 10.0,
             pace_timeout_ms: 1000,
             frames: 0,
@@ -246,6 +253,10 @@ fn load_source_blocking(args: &CameraArgs, progress: bool) -> anyhow::Result<Box
             SourceSpec::Ros2(_) => Some(conesight_sources::ros2::Ros2Params {
                 zenoh: args.common.zenoh.clone(),
                 domain: conesight_ros2::rmw_zenoh::domain_from_env().map_err(anyhow::Error::msg)?,
+                rmw: conesight_ros2::Rmw::from_env()?,
+                dds_interface: conesight_ros2::dds::interface_from_env(
+                    args.dds_interface.as_deref(),
+                )?,
                 calibration: args.calibration()?,
                 extrinsics: match &args.extrinsics {
                     Some(path) => conesight_core::Extrinsics::from_yaml_file(path)

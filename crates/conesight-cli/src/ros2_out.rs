@@ -1,10 +1,15 @@
-//! `conesight run --ros2 zenoh`: the run's cones and calibration as ROS 2 topics in rmw_zenoh's
-//! format on the run's own Zenoh session (`conesight_ros2::rmw_zenoh` has the formats):
-//! `/conesight/<camera>/cones` (`conesight_msgs/msg/ConeArray`, each cone with its keypoints
-//! from the same frame's keypoints message), `/conesight/<camera>/cone_markers`
+//! `conesight run --ros2 dds|zenoh` and `conesight ros2`: the run's cones and calibration as
+//! ROS 2 topics: `/conesight/<camera>/cones` (`conesight_msgs/msg/ConeArray`, each cone with its
+//! keypoints from the same frame's keypoints message), `/conesight/<camera>/cone_markers`
 //! (`visualization_msgs/msg/MarkerArray`, for RViz) and `/conesight/<camera>/camera_info`
-//! (`sensor_msgs/msg/CameraInfo`), published by node `conesight` on `ROS_DOMAIN_ID` (0 when
-//! unset). A message that does not convert is logged (rate-limited) and not published.
+//! (`sensor_msgs/msg/CameraInfo`), on `ROS_DOMAIN_ID` (0 when unset), either
+//! - over DDS (`conesight_ros2::dds`: `rt/` topics, `dds_::` types, CDR, ROS 2's default QoS),
+//!   as a ROS 2 node on Cyclone DDS or Fast DDS reads them; or
+//! - in rmw_zenoh's format on the run's own Zenoh session (`conesight_ros2::rmw_zenoh`), published
+//!   by node `conesight`.
+//!
+//! A message that does not convert or publish is logged (rate-limited), counted
+//! (`conesight_errors_total{kind="ros2_output"}`) and not published.
 
 use std::collections::{BTreeMap, VecDeque};
 
@@ -14,6 +19,7 @@ use conesight_bus::zenoh::liveliness::LivelinessToken;
 use conesight_bus::{Stream, Topics, declare_subscriber, decode};
 use conesight_pipeline::{Node, Shutdown};
 use conesight_proto::{ConeKeypoints, now_ns, pb};
+use conesight_ros2::dds::{self, Dds, DdsMessage};
 use conesight_ros2::msg::{CameraInfo, ConeArray, MarkerArray, RosMessage};
 use conesight_ros2::rmw_zenoh;
 
@@ -22,26 +28,54 @@ const NODE: &str = "conesight";
 /// Keypoints messages kept per camera to give each cone its keypoints.
 const KEYPOINTS_KEPT: usize = 32;
 
-/// One ROS 2 publisher: its key, GID, sequence and liveliness token.
-struct Publisher {
+/// Which ROS 2 middleware the topics go out on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Rmw {
+    /// DDS (RTPS over UDP): what ROS 2 nodes on rmw_cyclonedds_cpp or rmw_fastrtps_cpp read.
+    Dds,
+    /// rmw_zenoh's key expressions, attachments and liveliness tokens on this run's session.
+    Zenoh,
+}
+
+/// One rmw_zenoh publisher: its key, GID, sequence and liveliness token.
+struct ZenohPublisher {
     key: String,
     gid: [u8; 16],
     sequence: i64,
     _token: LivelinessToken,
 }
 
-struct Output {
+/// rmw_zenoh on the run's session.
+struct ZenohSink {
     session: Session,
     domain: u32,
     zid: String,
-    publishers: BTreeMap<String, Publisher>,
+    publishers: BTreeMap<String, ZenohPublisher>,
     next_entity: u32,
+    _node_token: LivelinessToken,
+}
+
+/// DDS writers, one per topic, made on first use.
+struct DdsSink {
+    dds: Dds,
+    cones: BTreeMap<String, dds::Writer<ConeArray>>,
+    markers: BTreeMap<String, dds::Writer<MarkerArray>>,
+    infos: BTreeMap<String, dds::Writer<CameraInfo>>,
+}
+
+enum Sink {
+    Zenoh(ZenohSink),
+    Dds(Box<DdsSink>),
+}
+
+struct Output {
+    sink: Sink,
     /// Counts samples published (`conesight_frames_processed_total`) and what was not
     /// (`conesight_errors_total{kind="ros2_output"}`).
     node: Node,
 }
 
-impl Output {
+impl ZenohSink {
     async fn publish<M: RosMessage>(&mut self, topic: &str, message: &M) -> anyhow::Result<()> {
         let payload = conesight_ros2::to_cdr(message)?;
         if !self.publishers.contains_key(topic) {
@@ -62,7 +96,7 @@ impl Output {
                 .map_err(|e| anyhow::anyhow!("declaring {token_key}: {e}"))?;
             self.publishers.insert(
                 topic.to_owned(),
-                Publisher {
+                ZenohPublisher {
                     key: rmw_zenoh::data_key::<M>(self.domain, topic),
                     gid: rmw_zenoh::gid(&self.zid, topic),
                     sequence: 0,
@@ -83,27 +117,126 @@ impl Output {
             .put(publisher.key.clone(), payload)
             .attachment(attachment.to_vec())
             .await
-            .map_err(|e| anyhow::anyhow!("publishing {}: {e}", publisher.key))?;
+            .map_err(|e| anyhow::anyhow!("publishing {}: {e}", publisher.key))
+    }
+}
+
+/// The writer of `topic` in `writers`, made on first use.
+async fn dds_write<M: DdsMessage>(
+    dds: &Dds,
+    writers: &mut BTreeMap<String, dds::Writer<M>>,
+    topic: &str,
+    message: &M,
+) -> anyhow::Result<()> {
+    if !writers.contains_key(topic) {
+        writers.insert(topic.to_owned(), dds.writer::<M>(topic).await?);
+    }
+    match writers.get(topic) {
+        Some(writer) => Ok(writer.write(message).await?),
+        None => Ok(()),
+    }
+}
+
+impl Output {
+    async fn cones(&mut self, topic: &str, message: &ConeArray) -> anyhow::Result<()> {
+        match &mut self.sink {
+            Sink::Zenoh(sink) => sink.publish(topic, message).await?,
+            Sink::Dds(sink) => dds_write(&sink.dds, &mut sink.cones, topic, message).await?,
+        }
+        self.node.metrics.frame_processed();
+        Ok(())
+    }
+
+    async fn markers(&mut self, topic: &str, message: &MarkerArray) -> anyhow::Result<()> {
+        match &mut self.sink {
+            Sink::Zenoh(sink) => sink.publish(topic, message).await?,
+            Sink::Dds(sink) => dds_write(&sink.dds, &mut sink.markers, topic, message).await?,
+        }
+        self.node.metrics.frame_processed();
+        Ok(())
+    }
+
+    async fn camera_info(&mut self, topic: &str, message: &CameraInfo) -> anyhow::Result<()> {
+        match &mut self.sink {
+            Sink::Zenoh(sink) => sink.publish(topic, message).await?,
+            Sink::Dds(sink) => dds_write(&sink.dds, &mut sink.infos, topic, message).await?,
+        }
         self.node.metrics.frame_processed();
         Ok(())
     }
 }
 
-/// Starts publishing the run's cones and calibration as ROS 2 topics over rmw_zenoh until
+/// How `serve` reaches ROS 2.
+#[derive(Debug, Clone)]
+pub struct Ros2Settings {
+    /// The middleware.
+    pub rmw: Rmw,
+    /// `--dds-interface`: the network interface DDS is confined to (DDS only).
+    pub dds_interface: Option<String>,
+}
+
+async fn open_sink(session: &Session, settings: &Ros2Settings) -> anyhow::Result<Sink> {
+    let domain = rmw_zenoh::domain_from_env().map_err(anyhow::Error::msg)?;
+    Ok(match settings.rmw {
+        Rmw::Zenoh => {
+            let zid = session.zid().to_string();
+            let node_token = session
+                .liveliness()
+                .declare_token(rmw_zenoh::node_token(domain, &zid, 0, NODE))
+                .await
+                .map_err(|e| anyhow::anyhow!("declaring the ROS 2 node's liveliness token: {e}"))?;
+            Sink::Zenoh(ZenohSink {
+                session: session.clone(),
+                domain,
+                zid,
+                publishers: BTreeMap::new(),
+                next_entity: 0,
+                _node_token: node_token,
+            })
+        }
+        Rmw::Dds => {
+            let interface = dds::interface_from_env(settings.dds_interface.as_deref())?;
+            let dds = dds::open(domain, interface.as_deref())
+                .await
+                .context("joining the ROS 2 domain over DDS")?;
+            Sink::Dds(Box::new(DdsSink {
+                dds,
+                cones: BTreeMap::new(),
+                markers: BTreeMap::new(),
+                infos: BTreeMap::new(),
+            }))
+        }
+    })
+}
+
+/// A line for the logs: where the topics go.
+pub fn describe(settings: &Ros2Settings) -> String {
+    let domain = rmw_zenoh::domain_from_env().unwrap_or(0);
+    match settings.rmw {
+        Rmw::Zenoh => format!("over rmw_zenoh (domain {domain})"),
+        Rmw::Dds => {
+            let interface = dds::interface_from_env(settings.dds_interface.as_deref())
+                .ok()
+                .flatten()
+                .map_or_else(
+                    || "every interface".to_owned(),
+                    |i| format!("interface {i}"),
+                );
+            format!("over DDS (domain {domain}, {interface})")
+        }
+    }
+}
+
+/// Starts publishing the run's cones and calibration as ROS 2 topics (`settings`) until
 /// `shutdown`, counting on `node`.
 pub async fn serve(
     session: &Session,
     topics: &Topics,
+    settings: &Ros2Settings,
     node: &Node,
     shutdown: &Shutdown,
 ) -> anyhow::Result<()> {
-    let domain = rmw_zenoh::domain_from_env().map_err(anyhow::Error::msg)?;
-    let zid = session.zid().to_string();
-    let node_token = session
-        .liveliness()
-        .declare_token(rmw_zenoh::node_token(domain, &zid, 0, NODE))
-        .await
-        .map_err(|e| anyhow::anyhow!("declaring the ROS 2 node's liveliness token: {e}"))?;
+    let sink = open_sink(session, settings).await?;
     let cones = declare_subscriber(session, topics.all_cameras(Stream::Cones)?, Stream::Cones)
         .await
         .context("subscribing to the cones")?;
@@ -120,16 +253,11 @@ pub async fn serve(
     )
     .await?;
     let mut output = Output {
-        session: session.clone(),
-        domain,
-        zid,
-        publishers: BTreeMap::new(),
-        next_entity: 0,
+        sink,
         node: node.clone(),
     };
     let shutdown = shutdown.clone();
     tokio::spawn(async move {
-        let _node_token = node_token;
         let mut kept: BTreeMap<String, VecDeque<(u64, Vec<ConeKeypoints>)>> = BTreeMap::new();
         loop {
             let result = tokio::select! {
@@ -170,6 +298,13 @@ pub struct Ros2Args {
     /// Serve /livez, /readyz and /metrics here.
     #[arg(long = "http-addr", default_value = "127.0.0.1:9094")]
     http_addr: std::net::SocketAddr,
+    /// The ROS 2 middleware: `dds` (Cyclone DDS, Fast DDS) or `zenoh` (rmw_zenoh).
+    #[arg(long, value_enum, default_value = "dds")]
+    rmw: Rmw,
+    /// DDS only: the network interface to use (e.g. `eth0`). Default: `lo` under
+    /// `ROS_LOCALHOST_ONLY=1` or `ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`, else every interface.
+    #[arg(long = "dds-interface")]
+    dds_interface: Option<String>,
 }
 
 /// `conesight ros2`: the ROS 2 output as a service of its own on the bus (liveliness token,
@@ -184,12 +319,16 @@ pub fn run(args: &Ros2Args) -> anyhow::Result<()> {
         let node = Node::new("ros2", "*", session.clone(), topics.clone(), None);
         let bound = node.serve_http(args.http_addr, &shutdown).await?;
         let _presence = node.announce().await?;
-        serve(&session, &topics, &node, &shutdown).await?;
+        let settings = Ros2Settings {
+            rmw: args.rmw,
+            dds_interface: args.dds_interface.clone(),
+        };
+        serve(&session, &topics, &settings, &node, &shutdown).await?;
         eprintln!(
-            "ros2: the cones of conesight/{}/** as ROS 2 topics over rmw_zenoh (domain {}); \
-             metrics on http://{bound}/metrics (Ctrl-C stops)",
+            "ros2: the cones of conesight/{}/** as ROS 2 topics {}; metrics on \
+             http://{bound}/metrics (Ctrl-C stops)",
             topics.namespace(),
-            rmw_zenoh::domain_from_env().unwrap_or(0)
+            describe(&settings)
         );
         shutdown.wait().await;
         let _ = session.close().await;
@@ -229,10 +368,10 @@ async fn on_cones(
         .unwrap_or_default();
     let array = conesight_ros2::convert::cone_array(&header, &cones, keypoints);
     let topic = conesight_ros2::bag::topic(&header.camera_id, "cones");
-    output.publish::<ConeArray>(&topic, &array).await?;
+    output.cones(&topic, &array).await?;
     let markers = conesight_ros2::convert::cone_markers(&array, &header.camera_id);
     let topic = conesight_ros2::bag::topic(&header.camera_id, "cone_markers");
-    output.publish::<MarkerArray>(&topic, &markers).await
+    output.markers(&topic, &markers).await
 }
 
 async fn on_camera_info(
@@ -244,5 +383,5 @@ async fn on_camera_info(
     let (camera, _) = info.to_core()?;
     let ros = conesight_ros2::convert::camera_info(&header, &camera);
     let topic = conesight_ros2::bag::topic(&header.camera_id, "camera_info");
-    output.publish::<CameraInfo>(&topic, &ros).await
+    output.camera_info(&topic, &ros).await
 }
