@@ -13,8 +13,8 @@
 //! **What ROS 2 expects** (rmw_cyclonedds and rmw_fastrtps alike): topic `rt<topic>`
 //! (`rt/conesight/cam/cones`), type `<package>::msg::dds_::<Type>_`, CDR (XCDR1, little
 //! endian) in the `.msg` field order, domain `ROS_DOMAIN_ID`. Publishers are reliable, volatile,
-//! keep-last 10 (ROS 2's default QoS); [`Dds::subscribe`] reads with a reliable and a
-//! best-effort reader, so a camera driver's reliable or best-effort publisher matches alike.
+//! keep-last 10 (ROS 2's default QoS); [`Dds::subscribe`] reads best-effort (why there), so a
+//! camera driver's reliable or best-effort publisher matches alike.
 //!
 //! Dust DDS drops a received sample that does not decode as its type (a peer with another
 //! definition under the same name) without reporting it: such samples cannot be counted here.
@@ -187,7 +187,7 @@ fn interface_socket(address: Ipv4Addr) -> std::io::Result<UdpSocket> {
 
 /// The user-data socket's receive buffer: a 1920x1200 bgr8 image is 6.9 MB in ~5,100
 /// fragments. Linux caps it at `net.core.rmem_max` (raise that on the car, as for any DDS
-/// carrying raw images); what overflows is sent again to the reliable reader.
+/// carrying raw images): an image whose fragments overflow it is lost.
 const RECEIVE_BUFFER_BYTES: usize = 16 << 20;
 
 /// A DDS domain participant of ROS 2 domain `domain` with one publisher and one subscriber.
@@ -402,45 +402,42 @@ impl Dds {
         Ok(Writer { writer })
     }
 
-    /// Calls `on_message` with each `M` on ROS 2 topic `topic`, keep-last 1, from two readers:
-    /// a reliable one, which matches reliable publishers (ROS 2's default QoS) and has lost
-    /// fragments of a large image sent again, and a best-effort one, which matches best-effort
-    /// publishers (ROS 2's sensor data QoS). A reliable publisher reaches both: `on_message`
-    /// may see a message twice.
+    /// Calls `on_message` with each `M` on ROS 2 topic `topic`, read best-effort, keep-last 1
+    /// (ROS 2's sensor data QoS: it matches reliable and best-effort publishers alike).
+    ///
+    /// Not reliable: Dust DDS 0.15's reliable reader panics (its executor thread, and with it
+    /// every DDS reader and writer of the process) when it asks for more than 256 lost fragments
+    /// of one sample (`FragmentNumberSet::new`), which a 1.7 MB image that lost its tail does.
+    /// Best-effort, an image that loses a fragment is dropped and the next one taken.
     pub async fn subscribe<M, F>(&self, topic: &str, on_message: F) -> Result<(), Ros2Error>
     where
         M: DdsMessage + 'static,
-        F: FnMut(M) + Clone + Send + 'static,
+        F: FnMut(M) + Send + 'static,
     {
         let topic_handle = self.topic::<M>(topic).await?;
-        for kind in [
-            ReliabilityQosPolicyKind::Reliable,
-            ReliabilityQosPolicyKind::BestEffort,
-        ] {
-            let qos = DataReaderQos {
-                reliability: ReliabilityQosPolicy {
-                    kind,
-                    max_blocking_time: DurationKind::Finite(DdsDuration::new(0, 100_000_000)),
-                },
-                history: HistoryQosPolicy {
-                    kind: HistoryQosPolicyKind::KeepLast(1),
-                },
-                ..Default::default()
-            };
-            let listener = Forward::<M, F> {
-                on_message: on_message.clone(),
-                _message: std::marker::PhantomData,
-            };
-            self.subscriber
-                .create_datareader::<M::Wire>(
-                    &topic_handle,
-                    QosKind::Specific(qos),
-                    Some(listener),
-                    &[StatusKind::DataAvailable],
-                )
-                .await
-                .map_err(|e| dds_error(&format!("subscribing to {topic}"), e))?;
-        }
+        let qos = DataReaderQos {
+            reliability: ReliabilityQosPolicy {
+                kind: ReliabilityQosPolicyKind::BestEffort,
+                max_blocking_time: DurationKind::Finite(DdsDuration::new(0, 100_000_000)),
+            },
+            history: HistoryQosPolicy {
+                kind: HistoryQosPolicyKind::KeepLast(1),
+            },
+            ..Default::default()
+        };
+        let listener = Forward::<M, F> {
+            on_message,
+            _message: std::marker::PhantomData,
+        };
+        self.subscriber
+            .create_datareader::<M::Wire>(
+                &topic_handle,
+                QosKind::Specific(qos),
+                Some(listener),
+                &[StatusKind::DataAvailable],
+            )
+            .await
+            .map_err(|e| dds_error(&format!("subscribing to {topic}"), e))?;
         Ok(())
     }
 }

@@ -4,10 +4,10 @@
 //! Subscribes to `sensor_msgs/msg/Image` on the topic (or `CompressedImage` for a topic ending
 //! in `/compressed`: JPEG) and to the `CameraInfo` of the topic's namespace (`/cam/camera_info`
 //! for `/cam/image_raw`):
-//! - over DDS ([`conesight_ros2::dds`]): `rt/cam/image_raw` in domain `ROS_DOMAIN_ID`, by a
-//!   reliable and a best-effort reader (so a driver's reliable or best-effort publisher
-//!   matches), on `--dds-interface` or as `ROS_LOCALHOST_ONLY` /
-//!   `ROS_AUTOMATIC_DISCOVERY_RANGE` say; a sample Dust DDS cannot decode as its type is dropped
+//! - over DDS ([`conesight_ros2::dds`]): `rt/cam/image_raw` in domain `ROS_DOMAIN_ID`,
+//!   best-effort (so a driver's reliable or best-effort publisher matches), on
+//!   `--dds-interface` or as `ROS_LOCALHOST_ONLY` / `ROS_AUTOMATIC_DISCOVERY_RANGE` say; an
+//!   image that lost a UDP fragment, or a sample Dust DDS cannot decode as its type, is dropped
 //!   there, uncounted;
 //! - over rmw_zenoh (Jazzy): on the camera service's Zenoh session (or, alone, on one of its own
 //!   with the service's `--zenoh-*` settings), `<ROS_DOMAIN_ID>/<topic>/<type>/*`.
