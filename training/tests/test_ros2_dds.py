@@ -181,14 +181,17 @@ def test_a_cyclone_dds_camera_topic_gives_the_cones_predict_finds(
     # Frames at half size (960x600 bgr8, 1.7 MB a message) with their calibration halved: a
     # full 6.9 MB frame arrives too (0.5 s here), but its thousands of UDP fragments take
     # long to repair under a parallel build when the kernel's receive buffer is small.
+    # Where the kernel caps receive buffers below two such frames, a quarter (480x300).
     full = sorted((sim / "images").glob("*.png"))
     calib = yaml.safe_load((sim / "camera_info" / f"{full[0].stem}.yaml").read_text())
-    calib["image_width"] //= 2
-    calib["image_height"] //= 2
+    rmem_max = int(Path("/proc/sys/net/core/rmem_max").read_text())
+    divisor = 2 if rmem_max >= 2 * 960 * 600 * 3 else 4
+    calib["image_width"] //= divisor
+    calib["image_height"] //= divisor
     for key in ("camera_matrix", "projection_matrix"):
         data = calib[key]["data"]
         columns = len(data) // 3
-        calib[key]["data"] = [v * 0.5 if i < 2 * columns else v for i, v in enumerate(data)]
+        calib[key]["data"] = [v / divisor if i < 2 * columns else v for i, v in enumerate(data)]
     half = tmp_path / "half"
     half.mkdir()
     calibration = half / "camera_info.yaml"
@@ -355,8 +358,11 @@ def test_a_cyclone_dds_camera_topic_gives_the_cones_predict_finds(
             assert min(math.dist(position, other) for other in got) < 0.01
         compared += 1
     assert compared >= 3, (compared, stderr[-2000:])
-    assert (calib["image_width"], calib["image_height"]) == (960, 600)
-    print(f"DDS source: {compared} frames' cones equal predict's, {bad:.0f} bad image counted")
+    assert sum(map(len, expected)) > 0, "predict found no cones on these frames"
+    print(
+        f"DDS source: {compared} {calib['image_width']}x{calib['image_height']} frames' cones "
+        f"equal predict's, {bad:.0f} bad image counted"
+    )
 
 
 def make_short_image():
