@@ -185,3 +185,57 @@ def cyclone_types(store):
         return made[name]
 
     return make
+
+
+def urllib_get(url: str) -> str:
+    """The body of an HTTP GET (a service's /metrics or /livez)."""
+    import urllib.request
+
+    with urllib.request.urlopen(url, timeout=10) as response:
+        return response.read().decode()
+
+
+def source_bad_frames(metrics: str) -> float:
+    """`conesight_errors_total{kind="source_bad_frame"}` in a /metrics text."""
+    return sum(
+        float(line.rsplit(" ", 1)[1])
+        for line in metrics.splitlines()
+        if line.startswith("conesight_errors_total") and 'kind="source_bad_frame"' in line
+    )
+
+
+def count_cones_equal_to_predict(binary, pngs, calibration, arrays, stamps) -> int:
+    """ConeArrays (their header stamp a key of `stamps`, whose value indexes `pngs`) whose
+    cones are, each within 1 cm in the camera frame, those `conesight predict` finds on that
+    image with `calibration`: how many were compared. Asserts predict found cones."""
+    import json
+    import math
+    import subprocess
+
+    predicted = subprocess.run(
+        [binary, "predict", *map(str, pngs), "--camera", str(calibration)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=True,
+    )
+    expected = [
+        [tuple(c["position_camera_m"]) for c in json.loads(line)["cones"]]
+        for line in predicted.stdout.strip().splitlines()
+    ]
+    assert sum(map(len, expected)) > 0, "predict found no cones on these frames"
+    compared = 0
+    for array in arrays:
+        stamp_ns = array.header.stamp.sec * 10**9 + array.header.stamp.nanosec
+        if stamp_ns not in stamps:
+            continue
+        want = expected[stamps[stamp_ns]]
+        got = [
+            (c.position_in_camera.x, c.position_in_camera.y, c.position_in_camera.z)
+            for c in array.cones
+        ]
+        assert len(got) == len(want), (len(got), len(want))
+        for position in want:
+            assert min(math.dist(position, other) for other in got) < 0.01
+        compared += 1
+    return compared

@@ -14,7 +14,6 @@ on loopback: Cyclone through CYCLONEDDS_URI, conesight (Dust DDS) through ROS_LO
 Skipped when the `conesight` binary is not built or cyclonedds / rosbags are missing.
 """
 
-import json
 import math
 import signal
 import subprocess
@@ -23,11 +22,14 @@ from pathlib import Path
 
 import pytest
 from conesight_process import (
+    count_cones_equal_to_predict,
     cyclone_types,
     dds_env,
     find_binary,
     free_port,
     ros2_typestore,
+    source_bad_frames,
+    urllib_get,
 )
 
 pytest.importorskip("cyclonedds")
@@ -42,6 +44,16 @@ def dds_binary():
     if "--dds-interface" not in usage:
         pytest.skip("this conesight binary has no DDS (rebuild it)")
     return binary
+
+
+def dds_domain(monkeypatch: pytest.MonkeyPatch) -> tuple[int, dict]:
+    """A DDS domain of this test and the environment of its processes; this process's Cyclone
+    DDS kept on loopback too."""
+    domain = 100 + free_port() % 100
+    env = dds_env(domain)
+    for key in ("CYCLONEDDS_URI", "ROS_LOCALHOST_ONLY", "ROS_AUTOMATIC_DISCOVERY_RANGE"):
+        monkeypatch.setenv(key, env[key])
+    return domain, env
 
 
 def reliable_reader(participant, name: str, cls):
@@ -65,10 +77,7 @@ def test_cones_markers_and_camera_info_reach_a_cyclone_dds_reader(
     from cyclonedds.domain import DomainParticipant
     from mcap import reader as mcap_reader
 
-    domain = 100 + free_port() % 100
-    env = dds_env(domain)
-    for key in ("CYCLONEDDS_URI", "ROS_LOCALHOST_ONLY", "ROS_AUTOMATIC_DISCOVERY_RANGE"):
-        monkeypatch.setenv(key, env[key])
+    domain, env = dds_domain(monkeypatch)
     store = ros2_typestore()
     make = cyclone_types(store)
     participant = DomainParticipant(domain)
@@ -204,10 +213,7 @@ def test_a_cyclone_dds_camera_topic_gives_the_cones_predict_finds(
         cv2.imwrite(str(pngs[-1]), small)
     frames = [cv2.imread(str(png), cv2.IMREAD_COLOR) for png in pngs]
 
-    domain = 100 + free_port() % 100
-    env = dds_env(domain)
-    for key in ("CYCLONEDDS_URI", "ROS_LOCALHOST_ONLY", "ROS_AUTOMATIC_DISCOVERY_RANGE"):
-        monkeypatch.setenv(key, env[key])
+    domain, env = dds_domain(monkeypatch)
     store = ros2_typestore()
     make = cyclone_types(store)
     Image, CameraInfo = make("sensor_msgs/msg/Image"), make("sensor_msgs/msg/CameraInfo")
@@ -325,40 +331,10 @@ def test_a_cyclone_dds_camera_topic_gives_the_cones_predict_finds(
         run.kill()
         _, stderr = run.communicate()
     assert run.returncode is not None
-    bad = sum(
-        float(line.rsplit(" ", 1)[1])
-        for line in metrics.splitlines()
-        if line.startswith("conesight_errors_total") and 'kind="source_bad_frame"' in line
-    )
+    bad = source_bad_frames(metrics)
     assert bad >= 1, [line for line in metrics.splitlines() if "errors_total" in line]
-
-    predicted = subprocess.run(
-        [binary, "predict", *map(str, pngs), "--camera", str(calibration)],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        check=True,
-    )
-    expected = [
-        [tuple(c["position_camera_m"]) for c in json.loads(line)["cones"]]
-        for line in predicted.stdout.strip().splitlines()
-    ]
-    compared = 0
-    for array in arrays:
-        stamp_ns = array.header.stamp.sec * 10**9 + array.header.stamp.nanosec
-        if stamp_ns not in stamps:
-            continue
-        want = expected[stamps[stamp_ns]]
-        got = [
-            (c.position_in_camera.x, c.position_in_camera.y, c.position_in_camera.z)
-            for c in array.cones
-        ]
-        assert len(got) == len(want), (len(got), len(want))
-        for position in want:
-            assert min(math.dist(position, other) for other in got) < 0.01
-        compared += 1
+    compared = count_cones_equal_to_predict(binary, pngs, calibration, arrays, stamps)
     assert compared >= 3, (compared, stderr[-2000:])
-    assert sum(map(len, expected)) > 0, "predict found no cones on these frames"
     print(
         f"DDS source: {compared} {calib['image_width']}x{calib['image_height']} frames' cones "
         f"equal predict's, {bad:.0f} bad image counted"
@@ -379,13 +355,6 @@ def make_short_image():
     return ShortImage
 
 
-def urllib_get(url: str) -> str:
-    import urllib.request
-
-    with urllib.request.urlopen(url, timeout=10) as response:
-        return response.read().decode()
-
-
 def test_the_ros2_service_over_dds_has_health_and_metrics(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -394,10 +363,7 @@ def test_the_ros2_service_over_dds_has_health_and_metrics(
     binary = dds_binary()
     from cyclonedds.domain import DomainParticipant
 
-    domain = 100 + free_port() % 100
-    env = dds_env(domain)
-    for key in ("CYCLONEDDS_URI", "ROS_LOCALHOST_ONLY", "ROS_AUTOMATIC_DISCOVERY_RANGE"):
-        monkeypatch.setenv(key, env[key])
+    domain, env = dds_domain(monkeypatch)
     participant = DomainParticipant(domain)
     cones_reader = reliable_reader(
         participant,

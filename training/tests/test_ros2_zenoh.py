@@ -22,10 +22,13 @@ import pytest
 from conesight_process import (
     bgr8_image_msg,
     camera_info_msg,
+    count_cones_equal_to_predict,
     find_binary,
     free_port,
     open_zenoh_peer,
     ros2_typestore,
+    source_bad_frames,
+    urllib_get,
 )
 
 zenoh = pytest.importorskip("zenoh")
@@ -146,7 +149,6 @@ def test_a_ros2_camera_topic_over_rmw_zenoh_gives_cones(tmp_path: Path) -> None:
     if "ros2:TOPIC" not in usage:
         pytest.skip("this conesight binary has no `--source ros2:` (rebuild it)")
     cv2 = pytest.importorskip("cv2")
-    import json
 
     import yaml
 
@@ -246,47 +248,11 @@ def test_a_ros2_camera_topic_over_rmw_zenoh_gives_cones(tmp_path: Path) -> None:
         run.kill()
         run.wait()
 
-    bad = sum(
-        float(line.rsplit(" ", 1)[1])
-        for line in metrics.splitlines()
-        if line.startswith("conesight_errors_total") and 'kind="source_bad_frame"' in line
-    )
+    bad = source_bad_frames(metrics)
     assert bad >= 2, [line for line in metrics.splitlines() if "errors_total" in line]
-
-    predicted = subprocess.run(
-        [binary, "predict", *map(str, pngs), "--camera", str(calibration)],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        check=True,
-    )
-    expected = [
-        [tuple(c["position_camera_m"]) for c in json.loads(line)["cones"]]
-        for line in predicted.stdout.strip().splitlines()
-    ]
-    compared = 0
-    for array in arrays:
-        stamp_ns = array.header.stamp.sec * 10**9 + array.header.stamp.nanosec
-        if stamp_ns not in stamps:
-            continue
-        want = expected[stamps[stamp_ns]]
-        got = [
-            (c.position_in_camera.x, c.position_in_camera.y, c.position_in_camera.z)
-            for c in array.cones
-        ]
-        assert len(got) == len(want), (len(got), len(want))
-        for position in want:
-            assert min(math.dist(position, other) for other in got) < 0.01
-        compared += 1
+    compared = count_cones_equal_to_predict(binary, pngs, calibration, arrays, stamps)
     assert compared >= 3, compared
     print(f"ros2 source: {compared} frames' cones equal predict's, {bad:.0f} bad images counted")
-
-
-def urllib_get(url: str) -> str:
-    import urllib.request
-
-    with urllib.request.urlopen(url, timeout=10) as response:
-        return response.read().decode()
 
 
 def test_the_ros2_service_publishes_a_runs_cones_with_health_and_metrics(tmp_path: Path) -> None:
