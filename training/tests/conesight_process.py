@@ -239,3 +239,17 @@ def count_cones_equal_to_predict(binary, pngs, calibration, arrays, stamps) -> i
             assert min(math.dist(position, other) for other in got) < 0.01
         compared += 1
     return compared
+
+
+def rendered_frames(binary, out: Path) -> tuple[list[Path], Path]:
+    """Two frames rendered by `conesight sim --seed 5` into `out`: their PNGs and the camera_info
+    YAML of their camera."""
+    import subprocess
+
+    subprocess.run(
+        [binary, "sim", "--frames", "2", "--seed", "5", "--out", str(out)],
+        check=True,
+        capture_output=True,
+    )
+    pngs = sorted((out / "images").glob("*.png"))
+    return pngs, out / "camera_info" / f"{pngs[0].stem}.yaml"

@@ -27,6 +27,7 @@ from conesight_process import (
     dds_env,
     find_binary,
     free_port,
+    rendered_frames,
     ros2_typestore,
     source_bad_frames,
     urllib_get,
@@ -181,18 +182,12 @@ def test_a_cyclone_dds_camera_topic_gives_the_cones_predict_finds(
     from cyclonedds.topic import Topic
     from cyclonedds.util import duration
 
-    sim = tmp_path / "sim"
-    subprocess.run(
-        [binary, "sim", "--frames", "2", "--seed", "5", "--out", str(sim)],
-        check=True,
-        capture_output=True,
-    )
     # Frames at half size (960x600 bgr8, 1.7 MB a message) with their calibration halved: a
-    # full 6.9 MB frame arrives too (0.5 s here), but its thousands of UDP fragments take
-    # long to repair under a parallel build when the kernel's receive buffer is small.
-    # Where the kernel caps receive buffers below two such frames, a quarter (480x300).
-    full = sorted((sim / "images").glob("*.png"))
-    calib = yaml.safe_load((sim / "camera_info" / f"{full[0].stem}.yaml").read_text())
+    # full 6.9 MB frame arrives too (0.5 s here), but its ~5,100 UDP fragments overflow a small
+    # kernel receive buffer, and the best-effort reader then drops the frame. Where the kernel
+    # caps receive buffers below two half-size frames, a quarter (480x300).
+    full, full_calibration = rendered_frames(binary, tmp_path / "sim")
+    calib = yaml.safe_load(full_calibration.read_text())
     rmem_max = int(Path("/proc/sys/net/core/rmem_max").read_text())
     divisor = 2 if rmem_max >= 2 * 960 * 600 * 3 else 4
     calib["image_width"] //= divisor

@@ -26,6 +26,7 @@ from conesight_process import (
     find_binary,
     free_port,
     open_zenoh_peer,
+    rendered_frames,
     ros2_typestore,
     source_bad_frames,
     urllib_get,
@@ -152,14 +153,7 @@ def test_a_ros2_camera_topic_over_rmw_zenoh_gives_cones(tmp_path: Path) -> None:
 
     import yaml
 
-    sim = tmp_path / "sim"
-    subprocess.run(
-        [binary, "sim", "--frames", "2", "--seed", "5", "--out", str(sim)],
-        check=True,
-        capture_output=True,
-    )
-    pngs = sorted((sim / "images").glob("*.png"))
-    calibration = sim / "camera_info" / f"{pngs[0].stem}.yaml"
+    pngs, calibration = rendered_frames(binary, tmp_path / "sim")
     calib = yaml.safe_load(calibration.read_text())
     store = ros2_typestore()
     types = store.types

@@ -11,6 +11,7 @@
 //! A message that does not convert or publish is logged (rate-limited), counted
 //! (`conesight_errors_total{kind="ros2_output"}`) and not published.
 
+use std::any::Any;
 use std::collections::{BTreeMap, VecDeque};
 
 use anyhow::Context;
@@ -20,7 +21,7 @@ use conesight_bus::{Stream, Topics, declare_subscriber, decode};
 use conesight_pipeline::{Node, Shutdown};
 use conesight_proto::{ConeKeypoints, now_ns, pb};
 use conesight_ros2::dds::{self, Dds, DdsMessage};
-use conesight_ros2::msg::{CameraInfo, ConeArray, MarkerArray, RosMessage};
+use conesight_ros2::msg::RosMessage;
 use conesight_ros2::rmw_zenoh;
 
 /// The ROS 2 node's name.
@@ -55,12 +56,10 @@ struct ZenohSink {
     _node_token: LivelinessToken,
 }
 
-/// DDS writers, one per topic, made on first use.
+/// DDS writers, one per topic (each a `dds::Writer` of its topic's message), made on first use.
 struct DdsSink {
     dds: Dds,
-    cones: BTreeMap<String, dds::Writer<ConeArray>>,
-    markers: BTreeMap<String, dds::Writer<MarkerArray>>,
-    infos: BTreeMap<String, dds::Writer<CameraInfo>>,
+    writers: BTreeMap<String, Box<dyn Any + Send>>,
 }
 
 enum Sink {
@@ -121,45 +120,35 @@ impl ZenohSink {
     }
 }
 
-/// The writer of `topic` in `writers`, made on first use.
-async fn dds_write<M: DdsMessage>(
-    dds: &Dds,
-    writers: &mut BTreeMap<String, dds::Writer<M>>,
-    topic: &str,
-    message: &M,
-) -> anyhow::Result<()> {
-    if !writers.contains_key(topic) {
-        writers.insert(topic.to_owned(), dds.writer::<M>(topic).await?);
-    }
-    match writers.get(topic) {
-        Some(writer) => Ok(writer.write(message).await?),
-        None => Ok(()),
+impl DdsSink {
+    /// Writes `message` on `topic` with the topic's writer, made on first use.
+    async fn write<M: DdsMessage + 'static>(
+        &mut self,
+        topic: &str,
+        message: M,
+    ) -> anyhow::Result<()> {
+        if !self.writers.contains_key(topic) {
+            let writer = self.dds.writer::<M>(topic).await?;
+            self.writers.insert(topic.to_owned(), Box::new(writer));
+        }
+        let writer = self
+            .writers
+            .get(topic)
+            .and_then(|w| w.downcast_ref::<dds::Writer<M>>())
+            .with_context(|| format!("{topic} carries another type than {}", M::TYPE))?;
+        Ok(writer.write(message).await?)
     }
 }
 
 impl Output {
-    async fn cones(&mut self, topic: &str, message: &ConeArray) -> anyhow::Result<()> {
+    async fn publish<M: DdsMessage + 'static>(
+        &mut self,
+        topic: &str,
+        message: M,
+    ) -> anyhow::Result<()> {
         match &mut self.sink {
-            Sink::Zenoh(sink) => sink.publish(topic, message).await?,
-            Sink::Dds(sink) => dds_write(&sink.dds, &mut sink.cones, topic, message).await?,
-        }
-        self.node.metrics.frame_processed();
-        Ok(())
-    }
-
-    async fn markers(&mut self, topic: &str, message: &MarkerArray) -> anyhow::Result<()> {
-        match &mut self.sink {
-            Sink::Zenoh(sink) => sink.publish(topic, message).await?,
-            Sink::Dds(sink) => dds_write(&sink.dds, &mut sink.markers, topic, message).await?,
-        }
-        self.node.metrics.frame_processed();
-        Ok(())
-    }
-
-    async fn camera_info(&mut self, topic: &str, message: &CameraInfo) -> anyhow::Result<()> {
-        match &mut self.sink {
-            Sink::Zenoh(sink) => sink.publish(topic, message).await?,
-            Sink::Dds(sink) => dds_write(&sink.dds, &mut sink.infos, topic, message).await?,
+            Sink::Zenoh(sink) => sink.publish(topic, &message).await?,
+            Sink::Dds(sink) => sink.write(topic, message).await?,
         }
         self.node.metrics.frame_processed();
         Ok(())
@@ -175,7 +164,8 @@ pub struct Ros2Settings {
     pub dds_interface: Option<String>,
 }
 
-async fn open_sink(session: &Session, settings: &Ros2Settings) -> anyhow::Result<Sink> {
+/// The sink of `settings`, and a line for the logs saying where the topics go.
+async fn open_sink(session: &Session, settings: &Ros2Settings) -> anyhow::Result<(Sink, String)> {
     let domain = rmw_zenoh::domain_from_env().map_err(anyhow::Error::msg)?;
     Ok(match settings.rmw {
         Rmw::Zenoh => {
@@ -185,46 +175,32 @@ async fn open_sink(session: &Session, settings: &Ros2Settings) -> anyhow::Result
                 .declare_token(rmw_zenoh::node_token(domain, &zid, 0, NODE))
                 .await
                 .map_err(|e| anyhow::anyhow!("declaring the ROS 2 node's liveliness token: {e}"))?;
-            Sink::Zenoh(ZenohSink {
+            let sink = Sink::Zenoh(ZenohSink {
                 session: session.clone(),
                 domain,
                 zid,
                 publishers: BTreeMap::new(),
                 next_entity: 0,
                 _node_token: node_token,
-            })
+            });
+            (sink, format!("over rmw_zenoh (domain {domain})"))
         }
         Rmw::Dds => {
             let interface = dds::interface_from_env(settings.dds_interface.as_deref())?;
             let dds = dds::open(domain, interface.as_deref())
                 .await
                 .context("joining the ROS 2 domain over DDS")?;
-            Sink::Dds(Box::new(DdsSink {
+            let sink = Sink::Dds(Box::new(DdsSink {
                 dds,
-                cones: BTreeMap::new(),
-                markers: BTreeMap::new(),
-                infos: BTreeMap::new(),
-            }))
+                writers: BTreeMap::new(),
+            }));
+            let on = interface.map_or_else(
+                || "every interface".to_owned(),
+                |i| format!("interface {i}"),
+            );
+            (sink, format!("over DDS (domain {domain}, {on})"))
         }
     })
-}
-
-/// A line for the logs: where the topics go.
-pub fn describe(settings: &Ros2Settings) -> String {
-    let domain = rmw_zenoh::domain_from_env().unwrap_or(0);
-    match settings.rmw {
-        Rmw::Zenoh => format!("over rmw_zenoh (domain {domain})"),
-        Rmw::Dds => {
-            let interface = dds::interface_from_env(settings.dds_interface.as_deref())
-                .ok()
-                .flatten()
-                .map_or_else(
-                    || "every interface".to_owned(),
-                    |i| format!("interface {i}"),
-                );
-            format!("over DDS (domain {domain}, {interface})")
-        }
-    }
 }
 
 /// Starts publishing the run's cones and calibration as ROS 2 topics (`settings`) until
@@ -235,8 +211,8 @@ pub async fn serve(
     settings: &Ros2Settings,
     node: &Node,
     shutdown: &Shutdown,
-) -> anyhow::Result<()> {
-    let sink = open_sink(session, settings).await?;
+) -> anyhow::Result<String> {
+    let (sink, description) = open_sink(session, settings).await?;
     let cones = declare_subscriber(session, topics.all_cameras(Stream::Cones)?, Stream::Cones)
         .await
         .context("subscribing to the cones")?;
@@ -286,7 +262,7 @@ pub async fn serve(
             }
         }
     });
-    Ok(())
+    Ok(description)
 }
 
 /// Arguments of `conesight ros2`.
@@ -323,12 +299,12 @@ pub fn run(args: &Ros2Args) -> anyhow::Result<()> {
             rmw: args.rmw,
             dds_interface: args.dds_interface.clone(),
         };
-        serve(&session, &topics, &settings, &node, &shutdown).await?;
+        let description = serve(&session, &topics, &settings, &node, &shutdown).await?;
         eprintln!(
             "ros2: the cones of conesight/{}/** as ROS 2 topics {}; metrics on \
              http://{bound}/metrics (Ctrl-C stops)",
             topics.namespace(),
-            describe(&settings)
+            description
         );
         shutdown.wait().await;
         let _ = session.close().await;
@@ -368,10 +344,10 @@ async fn on_cones(
         .unwrap_or_default();
     let array = conesight_ros2::convert::cone_array(&header, &cones, keypoints);
     let topic = conesight_ros2::bag::topic(&header.camera_id, "cones");
-    output.cones(&topic, &array).await?;
     let markers = conesight_ros2::convert::cone_markers(&array, &header.camera_id);
+    output.publish(&topic, array).await?;
     let topic = conesight_ros2::bag::topic(&header.camera_id, "cone_markers");
-    output.markers(&topic, &markers).await
+    output.publish(&topic, markers).await
 }
 
 async fn on_camera_info(
@@ -383,5 +359,5 @@ async fn on_camera_info(
     let (camera, _) = info.to_core()?;
     let ros = conesight_ros2::convert::camera_info(&header, &camera);
     let topic = conesight_ros2::bag::topic(&header.camera_id, "camera_info");
-    output.camera_info(&topic, &ros).await
+    output.publish(&topic, ros).await
 }

@@ -288,11 +288,11 @@ async fn run_async(args: RunArgs) -> anyhow::Result<()> {
             rmw,
             dds_interface: args.dds_interface.clone(),
         };
-        crate::ros2_out::serve(&session, &topics, &settings, &node, &shutdown).await?;
+        let description =
+            crate::ros2_out::serve(&session, &topics, &settings, &node, &shutdown).await?;
         println!(
-            "ROS 2: cones, markers and camera info on /conesight/{}/... {}",
-            args.camera,
-            crate::ros2_out::describe(&settings)
+            "ROS 2: cones, markers and camera info on /conesight/{}/... {description}",
+            args.camera
         );
     }
     if let Some(addr) = args.foxglove_addr {

@@ -197,7 +197,6 @@ pub struct Dds {
     participant: DomainParticipantAsync,
     publisher: PublisherAsync,
     subscriber: SubscriberAsync,
-    interface: Option<String>,
 }
 
 fn dds_error(what: &str, error: impl std::fmt::Debug) -> Ros2Error {
@@ -266,7 +265,6 @@ pub async fn open(domain: u32, interface: Option<&str>) -> Result<Dds, Ros2Error
         participant,
         publisher,
         subscriber,
-        interface: interface.map(str::to_owned),
     })
 }
 
@@ -284,7 +282,7 @@ pub trait DdsMessage: RosMessage + Sized {
     /// Its DDS form.
     type Wire: TypeSupport + Send + Sync + 'static;
     /// To the DDS form.
-    fn to_wire(&self) -> Self::Wire;
+    fn to_wire(self) -> Self::Wire;
     /// From the DDS form.
     fn from_wire(wire: Self::Wire) -> Self;
 }
@@ -293,7 +291,7 @@ macro_rules! same_on_the_wire {
     ($($t:ty),*) => {$(
         impl DdsMessage for $t {
             type Wire = $t;
-            fn to_wire(&self) -> Self { self.clone() }
+            fn to_wire(self) -> Self { self }
             fn from_wire(wire: Self) -> Self { wire }
         }
     )*};
@@ -307,20 +305,11 @@ pub struct Writer<M: DdsMessage> {
 
 impl<M: DdsMessage> Writer<M> {
     /// Publishes `message`.
-    pub async fn write(&self, message: &M) -> Result<(), Ros2Error> {
+    pub async fn write(&self, message: M) -> Result<(), Ros2Error> {
         self.writer
             .write(message.to_wire(), None)
             .await
             .map_err(|e| dds_error(&format!("writing {}", M::TYPE), e))
-    }
-
-    /// Readers matched so far.
-    pub async fn matched_readers(&self) -> usize {
-        self.writer
-            .get_matched_subscriptions()
-            .await
-            .map(|m| m.len())
-            .unwrap_or(0)
     }
 }
 
@@ -351,11 +340,6 @@ where
 }
 
 impl Dds {
-    /// The interface it is confined to, if any.
-    pub fn interface(&self) -> Option<&str> {
-        self.interface.as_deref()
-    }
-
     async fn topic<M: DdsMessage>(
         &self,
         topic: &str,
@@ -531,13 +515,13 @@ pub struct CameraInfoWire {
 
 impl DdsMessage for msg::CameraInfo {
     type Wire = CameraInfoWire;
-    fn to_wire(&self) -> CameraInfoWire {
+    fn to_wire(self) -> CameraInfoWire {
         CameraInfoWire {
-            header: self.header.clone(),
+            header: self.header,
             height: self.height,
             width: self.width,
-            distortion_model: self.distortion_model.clone(),
-            d: self.d.clone(),
+            distortion_model: self.distortion_model,
+            d: self.d,
             k: self.k.into(),
             r: self.r.into(),
             p: self.p.into(),
@@ -593,14 +577,14 @@ pub struct ConeArrayWire {
 
 impl DdsMessage for msg::ConeArray {
     type Wire = ConeArrayWire;
-    fn to_wire(&self) -> ConeArrayWire {
+    fn to_wire(self) -> ConeArrayWire {
         ConeArrayWire {
-            header: self.header.clone(),
-            camera_frame_id: self.camera_frame_id.clone(),
+            header: self.header,
+            camera_frame_id: self.camera_frame_id,
             frame_sequence: self.frame_sequence,
             cones: self
                 .cones
-                .iter()
+                .into_iter()
                 .map(|c| ConeWire {
                     cone_class: c.cone_class,
                     score: c.score,
@@ -611,7 +595,7 @@ impl DdsMessage for msg::ConeArray {
                     ranging: c.ranging,
                     reprojection_rms_px: c.reprojection_rms_px,
                     tilt_rad: c.tilt_rad,
-                    keypoints: c.keypoints.clone(),
+                    keypoints: c.keypoints,
                     box_x_min_px: c.box_x_min_px,
                     box_y_min_px: c.box_y_min_px,
                     box_x_max_px: c.box_x_max_px,
