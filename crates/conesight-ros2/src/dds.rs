@@ -513,37 +513,26 @@ pub struct CameraInfoWire {
     roi: RegionOfInterest,
 }
 
+/// `$target { a: $src.a, .., k: $src.k.into(), .. }`: a message and its wire mirror share
+/// their field names; the fixed arrays convert.
+macro_rules! move_fields {
+    ($src:expr => $target:path { $($same:ident),* ; $($converted:ident),* }) => {{
+        let src = $src;
+        $target { $($same: src.$same,)* $($converted: src.$converted.into(),)* }
+    }};
+}
+
 impl DdsMessage for msg::CameraInfo {
     type Wire = CameraInfoWire;
     fn to_wire(self) -> CameraInfoWire {
-        CameraInfoWire {
-            header: self.header,
-            height: self.height,
-            width: self.width,
-            distortion_model: self.distortion_model,
-            d: self.d,
-            k: self.k.into(),
-            r: self.r.into(),
-            p: self.p.into(),
-            binning_x: self.binning_x,
-            binning_y: self.binning_y,
-            roi: self.roi,
-        }
+        move_fields!(self => CameraInfoWire {
+            header, height, width, distortion_model, d, binning_x, binning_y, roi; k, r, p
+        })
     }
     fn from_wire(w: CameraInfoWire) -> Self {
-        Self {
-            header: w.header,
-            height: w.height,
-            width: w.width,
-            distortion_model: w.distortion_model,
-            d: w.d,
-            k: w.k.into(),
-            r: w.r.into(),
-            p: w.p.into(),
-            binning_x: w.binning_x,
-            binning_y: w.binning_y,
-            roi: w.roi,
-        }
+        move_fields!(w => Self {
+            header, height, width, distortion_model, d, binning_x, binning_y, roi; k, r, p
+        })
     }
 }
 
@@ -585,21 +574,12 @@ impl DdsMessage for msg::ConeArray {
             cones: self
                 .cones
                 .into_iter()
-                .map(|c| ConeWire {
-                    cone_class: c.cone_class,
-                    score: c.score,
-                    position: c.position,
-                    covariance: c.covariance.into(),
-                    position_in_camera: c.position_in_camera,
-                    range_m: c.range_m,
-                    ranging: c.ranging,
-                    reprojection_rms_px: c.reprojection_rms_px,
-                    tilt_rad: c.tilt_rad,
-                    keypoints: c.keypoints,
-                    box_x_min_px: c.box_x_min_px,
-                    box_y_min_px: c.box_y_min_px,
-                    box_x_max_px: c.box_x_max_px,
-                    box_y_max_px: c.box_y_max_px,
+                .map(|c| {
+                    move_fields!(c => ConeWire {
+                        cone_class, score, position, position_in_camera, range_m, ranging,
+                        reprojection_rms_px, tilt_rad, keypoints, box_x_min_px, box_y_min_px,
+                        box_x_max_px, box_y_max_px; covariance
+                    })
                 })
                 .collect(),
         }
@@ -612,21 +592,12 @@ impl DdsMessage for msg::ConeArray {
             cones: w
                 .cones
                 .into_iter()
-                .map(|c| msg::Cone {
-                    cone_class: c.cone_class,
-                    score: c.score,
-                    position: c.position,
-                    covariance: c.covariance.into(),
-                    position_in_camera: c.position_in_camera,
-                    range_m: c.range_m,
-                    ranging: c.ranging,
-                    reprojection_rms_px: c.reprojection_rms_px,
-                    tilt_rad: c.tilt_rad,
-                    keypoints: c.keypoints,
-                    box_x_min_px: c.box_x_min_px,
-                    box_y_min_px: c.box_y_min_px,
-                    box_x_max_px: c.box_x_max_px,
-                    box_y_max_px: c.box_y_max_px,
+                .map(|c| {
+                    move_fields!(c => msg::Cone {
+                        cone_class, score, position, position_in_camera, range_m, ranging,
+                        reprojection_rms_px, tilt_rad, keypoints, box_x_min_px, box_y_min_px,
+                        box_x_max_px, box_y_max_px; covariance
+                    })
                 })
                 .collect(),
         }
@@ -643,6 +614,33 @@ mod tests {
         assert_eq!(<[f64; 9]>::from(F64x9::from(nine)), nine);
         let twelve: [f64; 12] = std::array::from_fn(|i| i as f64 * 2.0);
         assert_eq!(<[f64; 12]>::from(F64x12::from(twelve)), twelve);
+    }
+
+    #[test]
+    fn messages_round_trip_through_their_wire_mirrors() {
+        let cone = msg::Cone {
+            cone_class: 4,
+            score: 0.5,
+            covariance: std::array::from_fn(|i| i as f64),
+            range_m: 12.5,
+            keypoints: vec![msg::Keypoint::default(); 7],
+            box_y_max_px: 3.0,
+            ..Default::default()
+        };
+        let array = msg::ConeArray {
+            camera_frame_id: "cam".to_owned(),
+            frame_sequence: 9,
+            cones: vec![cone],
+            ..Default::default()
+        };
+        assert_eq!(msg::ConeArray::from_wire(array.clone().to_wire()), array);
+        let info = msg::CameraInfo {
+            width: 1920,
+            d: vec![0.1, 0.2],
+            p: std::array::from_fn(|i| i as f64 + 1.0),
+            ..Default::default()
+        };
+        assert_eq!(msg::CameraInfo::from_wire(info.clone().to_wire()), info);
     }
 
     #[test]
