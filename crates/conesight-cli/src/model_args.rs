@@ -37,8 +37,9 @@ pub struct ModelArgs {
         default_value_t
     )]
     execution_provider: conesight_onnx::ExecutionProvider,
-    /// Which copy of the shipped networks runs: `fp32`, or `int8` (`models/*.int8.onnx`; same
-    /// accuracy on the real splits, the keypoint network 1.7x faster here: models/*.md). A
+    /// Which copy of the shipped networks runs: `auto` (default: the int8 keypoint network,
+    /// same real error and 1.7x faster here, and the fp32 detector, whose int8 copy is no
+    /// faster here), `fp32`, or `int8` (`models/*.int8.onnx`: models/*.md). A
     /// `--detector`/`--keypoint-model` path is used as given.
     #[arg(
         long = "precision",
@@ -74,6 +75,7 @@ impl ModelArgs {
                 allow_spinning: false,
                 execution_provider: self.execution_provider,
             },
+            keypoint_threads: None,
             on_ground_plane,
             ego_mask: self.ego_mask.as_deref().map(EgoMask::parse).transpose()?,
             cone_geometry: ConeGeometry::from_file_or_shipped(self.cone_geometry.as_deref())?,

@@ -228,7 +228,8 @@ async fn services_answer_queries_and_status_follows_them() {
             match service {
                 "camera" => (&[Stream::Frame, Stream::CameraInfo], 0, None),
                 "detector" => (&[Stream::Detections], 1, Some("models/detector.onnx")),
-                "keypoints" => (&[Stream::Keypoints], 2, Some("models/keypoints.onnx")),
+                // `--precision auto`, the default: the int8 keypoint network.
+                "keypoints" => (&[Stream::Keypoints], 2, Some("models/keypoints.int8.onnx")),
                 _ => (&[Stream::Cones], 2, None),
             };
         for stream in expected_outputs {

@@ -27,6 +27,9 @@ pub struct PipelineConfig {
     pub keypoint_model: Option<PathBuf>,
     /// ONNX Runtime library and threads.
     pub onnx: ModelOptions,
+    /// Intra-op threads of the keypoint network where they differ from `onnx`'s (the
+    /// detector's); `None`: `onnx.intra_threads`.
+    pub keypoint_threads: Option<usize>,
     /// Constrain cone bases to the road plane of the extrinsics.
     pub on_ground_plane: bool,
     /// Where the car itself shows: detections standing there are dropped.
@@ -102,7 +105,13 @@ impl InProcessPipeline {
             locate_keypoint_model_at(config.keypoint_model.as_deref(), config.precision);
         Ok(Self {
             detector,
-            keypoints: KeypointStage::load(&keypoint_model, &config.onnx)?,
+            keypoints: KeypointStage::load(
+                &keypoint_model,
+                &ModelOptions {
+                    intra_threads: config.keypoint_threads.or(config.onnx.intra_threads),
+                    ..config.onnx.clone()
+                },
+            )?,
             localiser: LocaliserStage::new(
                 camera,
                 extrinsics,

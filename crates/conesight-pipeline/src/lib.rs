@@ -48,7 +48,8 @@ pub use in_process::{FrameResult, InProcessPipeline, PipelineConfig, StageTiming
 pub use keypoint_stage::{KeypointOutput, KeypointStage};
 pub use localiser_stage::{LocaliserOutput, LocaliserStage};
 pub use models::{
-    DEFAULT_DETECTOR_FILE, Precision, detector_is_trained, locate_detector, locate_detector_at,
+    DEFAULT_DETECTOR_FILE, Network, Precision, detector_is_trained, locate_detector,
+    locate_detector_at, locate_keypoint_model_at,
 };
 pub use node::{Node, Shutdown};
 pub use presence::{Manifest, Output, Presence};
