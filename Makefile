@@ -83,7 +83,8 @@ quantize: setup
 	  --evaluate tuwr_val=real:$(REAL_DATA)/real-train/tuwr-keypoint-crops:val
 	PYTHONPATH=training $(PY) -m conesight_train.bench_precision --threads 1 2 --cards
 
-## In-process vs over Zenoh (4 processes): per-stage latency, rate sweep, bus cost ratio.
+## In-process vs over Zenoh (4 processes): per-stage latency, 2-30 Hz sweep with frames dropped,
+## bus cost ratio; fp32, int8 and the default `auto` models side by side (~13 minutes).
 bench-pipeline: setup
 	cargo build --release -p conesight-e2e
 	./target/release/pipeline-bench
