@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The arm64 image's `conesight` under qemu-user, against the x86 binary on the same image:
-# `--version`, then `predict` on docs/sample/frame.jpg, and the cones compared (same count and
-# classes, positions within 1e-3 of the range; compare.py prints the largest differences).
+# `--version`, then `predict` on docs/sample/frame.jpg with the fp32 and with the int8 networks,
+# and the cones compared per precision (same count and classes, positions within 1e-3 of the
+# range; compare.py prints the largest differences).
 #
 #   deploy/arm64/smoke.sh              # in the conesight/cli:arm64 container (docker + binfmt)
 #   deploy/arm64/smoke.sh --no-docker  # the cross-built binary on the arm64 rootfs (qemu -L)
@@ -52,11 +53,18 @@ echo "smoke.sh: qemu CPU $QEMU_CPU"
 echo "smoke.sh: arm64 --version: $("${arm[@]}" --version)"
 [[ $use_docker -eq 0 ]] && echo "smoke.sh: $(file -L "${arm[-1]}")"
 
-start=$(date +%s%N)
-"${arm[@]}" predict --camera "$arm_camera" "$arm_image" >"$out/arm64.jsonl"
-arm_ms=$((($(date +%s%N) - start) / 1000000))
-start=$(date +%s%N)
-"$x86" predict --camera "$camera" "$image" >"$out/x86.jsonl"
-x86_ms=$((($(date +%s%N) - start) / 1000000))
-echo "smoke.sh: predict took ${arm_ms} ms under qemu (arm64), ${x86_ms} ms native ($x86)"
-python3 deploy/arm64/compare.py "$out/x86.jsonl" "$out/arm64.jsonl"
+# Both copies of the networks (`--precision fp32`, then `int8`: models/*.int8.onnx, which run
+# on other kernels on each architecture); the default `auto` mixes the two.
+status=0
+for precision in fp32 int8; do
+    start=$(date +%s%N)
+    "${arm[@]}" predict --precision "$precision" --camera "$arm_camera" "$arm_image" \
+        >"$out/arm64-$precision.jsonl"
+    arm_ms=$((($(date +%s%N) - start) / 1000000))
+    start=$(date +%s%N)
+    "$x86" predict --precision "$precision" --camera "$camera" "$image" >"$out/x86-$precision.jsonl"
+    x86_ms=$((($(date +%s%N) - start) / 1000000))
+    echo "smoke.sh: $precision: predict took ${arm_ms} ms under qemu (arm64), ${x86_ms} ms native ($x86)"
+    python3 deploy/arm64/compare.py "$out/x86-$precision.jsonl" "$out/arm64-$precision.jsonl" || status=1
+done
+exit $status
