@@ -131,10 +131,12 @@ fi
 "$strip_tool" --strip-debug "$ctx"/bin/*
 cp "$ORT_LIB" "$ctx/onnxruntime/"
 shopt -s nullglob
-# Only the models the services run (and their cards): the paper baseline and the ablation
-# (20 MB) are for `make eval`, not for a car.
+# Only the models the services run (and their cards), fp32 and int8 (`--precision`; the
+# default `auto` runs the int8 keypoint network): the paper baseline and the ablation (20 MB)
+# are for `make eval`, not for a car.
 for model in detector keypoints; do
-    cp "models/$model.onnx" "models/$model.card.json" "models/$model.md" "$ctx/models/"
+    cp "models/$model.onnx" "models/$model.card.json" "models/$model.md" \
+        "models/$model.int8.onnx" "models/$model.int8.card.json" "$ctx/models/"
 done
 cp models/README.md "$ctx/models/"
 cp deploy/zenoh/*.json5 "$ctx/zenoh/"
