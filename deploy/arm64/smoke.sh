@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # The arm64 image's `conesight` under qemu-user, against the x86 binary on the same image:
 # `--version`, then `predict` on docs/sample/frame.jpg with the fp32 and with the int8 networks,
-# and the cones compared per precision (same count and classes, positions within 1e-3 of the
-# range; compare.py prints the largest differences).
+# and the cones compared per precision (each matched to one of the same class, positions within
+# 1e-3 of the range for fp32, looser for int8: see below; compare.py prints the largest
+# differences).
 #
 #   deploy/arm64/smoke.sh              # in the conesight/cli:arm64 container (docker + binfmt)
 #   deploy/arm64/smoke.sh --no-docker  # the cross-built binary on the arm64 rootfs (qemu -L)
@@ -65,6 +66,16 @@ for precision in fp32 int8; do
     "$x86" predict --precision "$precision" --camera "$camera" "$image" >"$out/x86-$precision.jsonl"
     x86_ms=$((($(date +%s%N) - start) / 1000000))
     echo "smoke.sh: $precision: predict took ${arm_ms} ms under qemu (arm64), ${x86_ms} ms native ($x86)"
-    python3 deploy/arm64/compare.py "$out/x86-$precision.jsonl" "$out/arm64-$precision.jsonl" || status=1
+    # fp32: the same arithmetic, so the same cones to 1e-3 of the range. int8: each CPU has its
+    # own integer kernels (x86 without VNNI multiplies u8 by s8 in 16-bit sums that can
+    # saturate; arm64 uses its dot product), which move keypoints by a fraction of a pixel:
+    # measured 2026-12-07 on docs/sample/frame.jpg, x86 (AVX2) int8 against arm64 int8 up to
+    # 8.3 % of the range on one 37 m cone, scores within 0.015, one cone scored 0.438 on x86
+    # below the 0.4 threshold on arm64; each within 5 % of its fp32. So int8 is held to 10 %
+    # of the range, 0.05 in score, and may lose cones within 0.05 of the threshold.
+    tolerance=()
+    [[ $precision == int8 ]] && tolerance=(--rel 0.1 --score 0.05 --threshold-band 0.05)
+    python3 deploy/arm64/compare.py "${tolerance[@]}" "$out/x86-$precision.jsonl" \
+        "$out/arm64-$precision.jsonl" || status=1
 done
 exit $status
