@@ -38,9 +38,9 @@ pub struct ModelArgs {
     )]
     execution_provider: conesight_onnx::ExecutionProvider,
     /// Which copy of the shipped networks runs: `auto` (default: the int8 keypoint network,
-    /// same real error and 1.7x faster here, and the fp32 detector, whose int8 copy is no
-    /// faster here), `fp32`, or `int8` (`models/*.int8.onnx`: models/*.md). A
-    /// `--detector`/`--keypoint-model` path is used as given.
+    /// same real error and 1.1-1.8x faster on the CPUs measured, and the fp32 detector,
+    /// whose int8 copy is slower there), `fp32`, or `int8` (`models/*.int8.onnx`:
+    /// models/*.md). A `--detector`/`--keypoint-model` path is used as given.
     #[arg(
         long = "precision",
         env = "CONESIGHT_PRECISION",

@@ -15,8 +15,8 @@ pub const DEFAULT_DETECTOR_FILE: &str = "models/detector.onnx";
 pub enum Precision {
     /// Per network, the copy with the better accuracy per millisecond (issue 42's rule: int8
     /// where it is within 0.01 mAP / 0.05 px of fp32 and faster): the int8 keypoint network
-    /// (same real error, 1.7-1.8x faster on a 2-core x86 CPU) and the fp32 detector (its int8
-    /// copy is no faster there); the fp32 copy where the int8 file is missing.
+    /// (same real error, 1.1-1.8x faster on the 2-core x86 CPUs measured) and the fp32 detector
+    /// (its int8 copy is slower there); the fp32 copy where the int8 file is missing.
     #[default]
     Auto,
     /// The fp32 networks (`models/detector.onnx`, `models/keypoints.onnx`).
@@ -116,14 +116,7 @@ pub fn locate_keypoint_model_at(explicit: Option<&Path>, precision: Precision) -
 /// roots ([`conesight_onnx::runtime::checkout_roots`]); the first existing file, or the
 /// explicit/default path when none exists (loading then names the missing file).
 pub fn locate_detector(explicit: Option<&Path>) -> PathBuf {
-    if let Some(path) = explicit {
-        return path.to_path_buf();
-    }
-    conesight_onnx::runtime::checkout_roots()
-        .into_iter()
-        .map(|root| root.join(DEFAULT_DETECTOR_FILE))
-        .find(|candidate| candidate.is_file())
-        .unwrap_or_else(|| PathBuf::from(DEFAULT_DETECTOR_FILE))
+    locate_detector_at(explicit, Precision::Fp32)
 }
 
 /// True when `model` exists and its card (`NAME.card.json`) records evaluation metrics, i.e.

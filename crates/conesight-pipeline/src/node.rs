@@ -77,9 +77,9 @@ pub struct OnnxArgs {
     )]
     pub spinning: bool,
     /// Which copy of the shipped network runs: `auto` (default: the int8 keypoint network,
-    /// same real error and 1.7x faster here, and the fp32 detector, whose int8 copy is no
-    /// faster here), `fp32`, or `int8` (`models/*.int8.onnx`: models/*.md). A
-    /// `--model`/`--detector` path is used as given.
+    /// same real error and 1.1-1.8x faster on the CPUs measured, and the fp32 detector,
+    /// whose int8 copy is slower there), `fp32`, or `int8` (`models/*.int8.onnx`:
+    /// models/*.md). A `--model`/`--detector` path is used as given.
     #[arg(
         long = "precision",
         env = "CONESIGHT_PRECISION",

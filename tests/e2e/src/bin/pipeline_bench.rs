@@ -162,20 +162,18 @@ fn detector_model(precision: Precision) -> anyhow::Result<(PathBuf, &'static str
 /// figures from one run on the same frames): the detector's real-test mAP@0.5 and the keypoint
 /// network's mean error on the pooled real validation crops, px.
 fn card_accuracy(precision: Precision) -> (Option<f64>, Option<f64>) {
-    let read = |file: &str| -> Option<serde_json::Value> {
-        let path = conesight_onnx::runtime::checkout_roots()
-            .into_iter()
-            .map(|root| root.join(file))
-            .find(|p| p.is_file())?;
-        serde_json::from_str(&std::fs::read_to_string(path).ok()?).ok()
+    // Both figures live in the int8 copy's card, next to the int8 file.
+    let read = |int8_model: PathBuf| -> Option<serde_json::Value> {
+        let card = conesight_detect::ModelCard::path_for(&int8_model);
+        serde_json::from_str(&std::fs::read_to_string(card).ok()?).ok()
     };
     let detector = precision.of(conesight_pipeline::Network::Detector);
     let keypoints = precision.of(conesight_pipeline::Network::Keypoints);
-    let map = read("models/detector.int8.card.json").and_then(|card| {
+    let map = read(locate_detector_at(None, Precision::Int8)).and_then(|card| {
         card.pointer(&format!("/int8/vs_fp32/test/{}/map50", detector.as_str()))?
             .as_f64()
     });
-    let px = read("models/keypoints.int8.card.json").and_then(|card| {
+    let px = read(locate_keypoint_model_at(None, Precision::Int8)).and_then(|card| {
         card.pointer(&format!(
             "/int8/vs_fp32/pooled/{}_mean_px",
             keypoints.as_str()
