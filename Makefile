@@ -72,7 +72,7 @@ quantize: setup
 	  --model models/detector.onnx --out models/detector.int8.onnx \
 	  --calibration yolo:$(REAL_DATA)/real-train/fsoco-boxes/train \
 	  --evaluate test=yolo:$(REAL_DATA)/real-train/fsoco-boxes/test \
-	  --evaluate valid=yolo:$(REAL_DATA)/real-train/fsoco-boxes/valid --exclude first
+	  --evaluate valid=yolo:$(REAL_DATA)/real-train/fsoco-boxes/valid --exclude first --reduce-range
 	PYTHONPATH=training $(PY) -m conesight_train.quantize keypoints \
 	  --model models/keypoints.onnx --out models/keypoints.int8.onnx \
 	  --calibration real:$(REAL_DATA)/real-train/amz-keypoint-crops-hires:train \
@@ -80,7 +80,7 @@ quantize: setup
 	  --calibration real:$(REAL_DATA)/real-dev/fsoco-keypoint-crops:train \
 	  --evaluate amz_val=real:$(REAL_DATA)/real-dev/fsoco-keypoint-crops:val \
 	  --evaluate hires_val=real:$(REAL_DATA)/real-train/amz-keypoint-crops-hires:val \
-	  --evaluate tuwr_val=real:$(REAL_DATA)/real-train/tuwr-keypoint-crops:val
+	  --evaluate tuwr_val=real:$(REAL_DATA)/real-train/tuwr-keypoint-crops:val --reduce-range
 	PYTHONPATH=training $(PY) -m conesight_train.bench_precision --threads 1 2 --cards
 
 ## In-process vs over Zenoh (4 processes): per-stage latency, 2-30 Hz sweep with frames dropped,

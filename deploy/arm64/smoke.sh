@@ -1,9 +1,9 @@
 #!/usr/bin/env bash
 # The arm64 image's `conesight` under qemu-user, against the x86 binary on the same image:
-# `--version`, then `predict` on docs/sample/frame.jpg with the fp32 and with the int8 networks,
-# and the cones compared per precision (each matched to one of the same class, positions within
-# 1e-3 of the range for fp32, looser for int8: see below; compare.py prints the largest
-# differences).
+# `--version`, then `predict` on docs/sample/frame.jpg with the fp32 networks, the default mix
+# (`auto`) and the int8 networks, and the cones compared per precision (each matched to one of
+# the same class, positions within 1e-3 of the range for fp32, looser where int8 kernels run:
+# see below; compare.py prints the largest differences).
 #
 #   deploy/arm64/smoke.sh              # in the conesight/cli:arm64 container (docker + binfmt)
 #   deploy/arm64/smoke.sh --no-docker  # the cross-built binary on the arm64 rootfs (qemu -L)
@@ -54,10 +54,10 @@ echo "smoke.sh: qemu CPU $QEMU_CPU"
 echo "smoke.sh: arm64 --version: $("${arm[@]}" --version)"
 [[ $use_docker -eq 0 ]] && echo "smoke.sh: $(file -L "${arm[-1]}")"
 
-# Both copies of the networks (`--precision fp32`, then `int8`: models/*.int8.onnx, which run
-# on other kernels on each architecture); the default `auto` mixes the two.
+# The fp32 networks, the default `auto` (int8 keypoints, fp32 detector) and both int8 copies
+# (`--precision int8`: models/*.int8.onnx, which run on other kernels on each architecture).
 status=0
-for precision in fp32 int8; do
+for precision in fp32 auto int8; do
     start=$(date +%s%N)
     "${arm[@]}" predict --precision "$precision" --camera "$arm_camera" "$arm_image" \
         >"$out/arm64-$precision.jsonl"
@@ -66,14 +66,17 @@ for precision in fp32 int8; do
     "$x86" predict --precision "$precision" --camera "$camera" "$image" >"$out/x86-$precision.jsonl"
     x86_ms=$((($(date +%s%N) - start) / 1000000))
     echo "smoke.sh: $precision: predict took ${arm_ms} ms under qemu (arm64), ${x86_ms} ms native ($x86)"
-    # fp32: the same arithmetic, so the same cones to 1e-3 of the range. int8: each CPU has its
-    # own integer kernels (x86 without VNNI multiplies u8 by s8 in 16-bit sums that can
-    # saturate; arm64 uses its dot product), which move keypoints by a fraction of a pixel:
-    # measured 2026-12-07 on docs/sample/frame.jpg, x86 (AVX2) int8 against arm64 int8 up to
-    # 8.3 % of the range on one 37 m cone, scores within 0.015, one cone scored 0.438 on x86
-    # below the 0.4 threshold on arm64; each within 5 % of its fp32. So int8 is held to 10 %
-    # of the range, 0.05 in score, and may lose cones within 0.05 of the threshold.
+    # fp32: the same arithmetic, so the same cones to 1e-3 of the range. Int8 networks run on
+    # each CPU's own integer kernels (measured 2026-12-07 on docs/sample/frame.jpg, x86 AVX2
+    # against arm64 under qemu, 7-bit weights): `auto` (int8 keypoints behind the fp32
+    # detector) moved one 14 m cone by 1.24e-3 of its range (1.3e-7 with the sixth detector's
+    # boxes), so auto is held to 1 % of the range with the fp32 detector's exact scores;
+    # `int8` (the int8 detector too: other boxes, hence other crops) up to 3.2 % of the range,
+    # scores within 0.041, one cone at 0.402 on one side only (8.3 % and one cone lost with
+    # the earlier 8-bit weights), so it is held to 10 % of the range, 0.05 in score, and may
+    # lose cones within 0.05 of the threshold.
     tolerance=()
+    [[ $precision == auto ]] && tolerance=(--rel 0.01)
     [[ $precision == int8 ]] && tolerance=(--rel 0.1 --score 0.05 --threshold-band 0.05)
     python3 deploy/arm64/compare.py "${tolerance[@]}" "$out/x86-$precision.jsonl" \
         "$out/arm64-$precision.jsonl" || status=1
