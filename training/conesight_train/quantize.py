@@ -422,7 +422,7 @@ def main(argv: list[str] | None = None) -> None:
         args.exclude,
         args.symmetric_activations,
         "python -m conesight_train.quantize " + shlex.join(sys.argv[1:] if argv is None else argv),
-        args.reduce_range,
+        reduce_range=args.reduce_range,
     )
     fp32_card = json.loads(card_path_for(args.model).read_text())
     # The detector evaluator reads the card beside the model: write it before measuring.
