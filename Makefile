@@ -72,8 +72,7 @@ quantize: setup
 	  --model models/detector.onnx --out models/detector.int8.onnx \
 	  --calibration yolo:$(REAL_DATA)/real-train/fsoco-boxes/train \
 	  --evaluate test=yolo:$(REAL_DATA)/real-train/fsoco-boxes/test \
-	  --evaluate valid=yolo:$(REAL_DATA)/real-train/fsoco-boxes/valid --exclude first --reduce-range \
-	  --method entropy
+	  --evaluate valid=yolo:$(REAL_DATA)/real-train/fsoco-boxes/valid --exclude first --reduce-range
 	PYTHONPATH=training $(PY) -m conesight_train.quantize keypoints \
 	  --model models/keypoints.onnx --out models/keypoints.int8.onnx \
 	  --calibration real:$(REAL_DATA)/real-train/amz-keypoint-crops-hires:train \
