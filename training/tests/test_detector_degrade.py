@@ -13,7 +13,7 @@ from conesight_train.detector.config import TrainConfig, open_source
 from conesight_train.detector.data import LabelledFrame, ToyFrames
 from conesight_train.detector.degrade import DegradeParams, degrade, write_degraded_split
 from conesight_train.detector.frame_input import FrameInputParams
-from conesight_train.detector.negatives import hard_negatives, is_negative
+from conesight_train.detector.negatives import hard_negatives, is_negative, merge
 from conesight_train.detector.train import train
 
 
@@ -93,6 +93,16 @@ def test_windows_centre_on_the_mined_negatives(tmp_path):
         assert ((b - r) > 100).sum() > 50, f"seed {seed}: the window missed the negative"
     with pytest.raises(ValueError, match="negatives"):
         hard_negatives(str(tmp_path / "missing.json"))
+
+
+def test_negatives_of_several_sources_merge_and_a_shared_frame_name_is_an_error():
+    found: dict[str, list] = {}
+    merge(found, {"amz_001": [[1, 2, 3, 4, 0.5]]}, "yolo:train")
+    merge(found, {"000000": [[5, 6, 7, 8, 0.9]]}, "out/sim-cone-free")
+    assert sorted(found) == ["000000", "amz_001"]
+    with pytest.raises(ValueError, match="out/sim-b: frame names \\['000000'\\]"):
+        merge(found, {"000000": [[0, 0, 1, 1, 0.4]]}, "out/sim-b")
+    assert found["000000"] == [[5, 6, 7, 8, 0.9]]
 
 
 def test_training_on_a_missing_gpu_says_so(tmp_path):

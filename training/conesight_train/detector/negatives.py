@@ -5,7 +5,13 @@ whatever an earlier model took for a cone. Training centres a share of its windo
 the frame's area.
 
     python -m conesight_train.detector.negatives --onnx models/detector.onnx \
-        --data yolo:../shared/data/real-train/fsoco-boxes/train --out build/negatives.json
+        --data yolo:../shared/data/real-train/fsoco-boxes/train --out build/negatives.json \
+        [--data out/sim-cone-free ...]
+
+`--data` may be given more than once (real frames and cone-free renders, `conesight sim
+--no-cones`, where every detection is a false cone); the frames' names must differ across
+them, since training looks the boxes up by name. Training finds them only on frames it reads
+whole (a real split, a renderer folder without `cache:`), not on cached renders.
 
 A detection counts as a negative when it overlaps no labelled box of any class, ignore regions
 (unknown_cone) included, by more than `MAX_IOU`, and does not lie inside one (a detection on
@@ -72,6 +78,18 @@ def mine(data: str, onnx: Path, threads: int = 1, limit: int | None = None) -> d
     return found
 
 
+def merge(found: dict[str, list], mined: dict[str, list], data: str) -> None:
+    """Adds `mined` (from source `data`) to `found`; names already there are an error, since
+    training looks the boxes up by frame name."""
+    clash = sorted(found.keys() & mined.keys())
+    if clash:
+        raise ValueError(
+            f"{data}: frame names {clash[:3]} also appear in an earlier --data; training looks "
+            "hard negatives up by frame name, so give one source's frames other names"
+        )
+    found.update(mined)
+
+
 @cache
 def hard_negatives(path: str) -> dict[str, np.ndarray]:
     """The mined JSON as {frame name: boxes [N, 4]} (read once per process)."""
@@ -89,12 +107,17 @@ def main(argv: list[str] | None = None) -> None:
     """CLI entry point."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--onnx", type=Path, required=True)
-    parser.add_argument("--data", required=True)
+    parser.add_argument("--data", required=True, action="append", help="a source; repeatable")
     parser.add_argument("--out", type=Path, required=True)
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--limit", type=int)
     args = parser.parse_args(argv)
-    found = mine(args.data, args.onnx, args.threads, args.limit)
+    found: dict[str, list] = {}
+    for data in args.data:
+        try:
+            merge(found, mine(data, args.onnx, args.threads, args.limit), data)
+        except ValueError as err:
+            parser.error(str(err))
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(found, indent=1) + "\n")
     total = sum(len(b) for b in found.values())
