@@ -179,45 +179,38 @@ fn amz_frames() -> Option<Vec<PathBuf>> {
     Some(frames)
 }
 
-/// Base heights (vehicle z) of the placed cones of `predict` JSON lines within `max_range_m`.
-fn base_heights(jsonl: &str, max_range_m: f64) -> Vec<f64> {
-    let mut z: Vec<f64> = placed_cones(jsonl)
-        .filter(|(range, _)| *range < max_range_m)
-        .map(|(_, z)| z)
-        .collect();
-    z.sort_by(f64::total_cmp);
-    z
-}
-
 /// (range, base height) of every placed cone of `predict` JSON lines.
-fn placed_cones(jsonl: &str) -> impl Iterator<Item = (f64, f64)> + '_ {
-    jsonl.lines().flat_map(|line| {
-        let value: serde_json::Value = serde_json::from_str(line).unwrap();
-        value["cones"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .filter_map(|cone| {
-                Some((
-                    cone["range_m"].as_f64()?,
-                    cone["position_vehicle_m"][2].as_f64()?,
-                ))
-            })
-            .collect::<Vec<_>>()
-    })
+fn placed_cones(jsonl: &str) -> Vec<(f64, f64)> {
+    jsonl
+        .lines()
+        .flat_map(|line| {
+            let value: serde_json::Value = serde_json::from_str(line).unwrap();
+            value["cones"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .filter_map(|cone| {
+                    Some((
+                        cone["range_m"].as_f64()?,
+                        cone["position_vehicle_m"][2].as_f64()?,
+                    ))
+                })
+                .collect::<Vec<_>>()
+        })
+        .collect()
 }
 
-/// Base heights of the placed cones of `predict` JSON lines per 10 m band of range: (band
-/// start, median, interquartile mean, cones). The interquartile mean is what the test bounds:
+/// Base heights of placed cones (range, height) per 10 m band of range: (band start, median,
+/// interquartile mean, cones). The interquartile mean is what the test bounds:
 /// on the real AMZ frames the 0-10 m band holds two clusters, the right-hand (yellow) cones
 /// about 0.15-0.2 m above the road and the left-hand (blue) ones, seen near the frame's edge
 /// where the guessed pinhole's missing distortion bends most, 0.2-0.5 m below it, with an
 /// empty gap between them where the band's median falls: one cone more or less on either side
 /// moved it from +0.064 to +0.107 m with the same cones at the same heights (2026-12-07, the
 /// sixth detector and a retrained one: 32 near cones matched, heights 0.002 m apart).
-fn base_heights_by_band(jsonl: &str) -> Vec<(f64, f64, f64, usize)> {
+fn base_heights_by_band(cones: &[(f64, f64)]) -> Vec<(f64, f64, f64, usize)> {
     let mut bands: std::collections::BTreeMap<i64, Vec<f64>> = Default::default();
-    for (range, z) in placed_cones(jsonl) {
+    for &(range, z) in cones {
         bands
             .entry((range / 10.0).floor() as i64)
             .or_default()
@@ -274,8 +267,14 @@ fn after_mount_real_cone_bases_stand_on_the_road() {
         args.extend(frames.iter().map(|p| p.to_str().unwrap()));
         let (ok, stdout, stderr) = conesight(&args);
         assert!(ok, "conesight predict failed:\n{stderr}");
-        let bands = base_heights_by_band(&stdout);
-        let within_30 = base_heights(&stdout, 30.0);
+        let cones = placed_cones(&stdout);
+        let bands = base_heights_by_band(&cones);
+        let mut within_30: Vec<f64> = cones
+            .iter()
+            .filter(|(range, _)| *range < 30.0)
+            .map(|(_, z)| *z)
+            .collect();
+        within_30.sort_by(f64::total_cmp);
         let median = within_30[within_30.len() / 2];
         eprintln!(
             "{}: median base height to 30 m {median:+.3} ({}); by range, median / interquartile \
